@@ -1,0 +1,177 @@
+"""Robot description (paper Table II), derived section properties and stiffness matrices."""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._checks import as_array, check_range, is_concrete
+
+_SCALARS = (
+    "length",
+    "outer_diameter",
+    "channel_diameter",
+    "tendon_offset",
+    "tendon_channel_diameter",
+    "E_silicone",
+    "nu_silicone",
+    "density_silicone",
+    "tube_outer_diameter",
+    "tube_inner_diameter",
+    "E_tube",
+    "nu_tube",
+    "density_tube",
+)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Robot:
+    """Geometry and materials of the TDCT robot, SI units; every field is a differentiable leaf.
+
+    Defaults are the paper's Table II. The paper does not give the tendon offset, the tendon
+    channel diameter or the densities: ``tendon_offset`` = 6 mm is an estimate from the bending
+    range the paper reports (+61.4 deg at 10 N, Sec. III.B), the channel diameter is a guess, and
+    the densities are handbook values for Elastosil M4601 and Nitinol.
+
+    Attributes:
+        length: robot length L [m].
+        outer_diameter: silicone body diameter [m].
+        channel_diameter: central channel the tube slides in [m].
+        tendon_offset: tendon radius r_t from the axis [m].
+        tendon_angles: tendon positions about +z from body +x [rad], shape (n_tendons,).
+            Default: tendon 1 at +y, then counter-clockwise in 90 degree steps.
+        tendon_channel_diameter: diameter of each tendon channel [m].
+        E_silicone, nu_silicone, density_silicone: silicone modulus [Pa], Poisson ratio,
+            density [kg/m^3].
+        tube_outer_diameter, tube_inner_diameter: Nitinol tube annulus [m].
+        E_tube, nu_tube, density_tube: tube modulus [Pa], Poisson ratio, density [kg/m^3].
+    """
+
+    length: float = 0.160
+    outer_diameter: float = 0.020
+    channel_diameter: float = 1.5e-3
+    tendon_offset: float = 6.0e-3
+    tendon_angles: tuple = (np.pi / 2, np.pi, 3 * np.pi / 2, 0.0)
+    tendon_channel_diameter: float = 1.0e-3
+    E_silicone: float = 0.85e6
+    nu_silicone: float = 0.5
+    density_silicone: float = 1130.0
+    tube_outer_diameter: float = 1.397e-3
+    tube_inner_diameter: float = 1.118e-3
+    E_tube: float = 83e9
+    nu_tube: float = 0.33
+    density_tube: float = 6450.0
+
+    def __post_init__(self):
+        for name in _SCALARS:
+            object.__setattr__(self, name, as_array(name, getattr(self, name), ()))
+        angles = self.tendon_angles
+        if is_concrete(angles):
+            n = np.asarray(angles).size
+            angles = as_array("tendon_angles", angles, (n,))
+            if n == 0:
+                raise ValueError("tendon_angles must list at least one tendon, got an empty list")
+        object.__setattr__(self, "tendon_angles", angles)
+        self._check()
+
+    def _check(self):
+        pos = dict(lo=0.0, lo_open=True)
+        for name in ("length", "outer_diameter", "E_silicone", "E_tube", "tube_outer_diameter"):
+            check_range(name, getattr(self, name), **pos)
+        for name in ("density_silicone", "density_tube", "tendon_channel_diameter", "tube_inner_diameter"):
+            check_range(name, getattr(self, name), 0.0)
+        for name in ("nu_silicone", "nu_tube"):
+            check_range(name, getattr(self, name), -1.0, 0.5, lo_open=True)
+        if not all(is_concrete(getattr(self, f.name)) for f in dataclasses.fields(self)):
+            return
+        check_range("channel_diameter", self.channel_diameter, 0.0, self.outer_diameter, hi_open=True, unit=" m")
+        check_range("tube_outer_diameter", self.tube_outer_diameter, 0.0, self.channel_diameter, lo_open=True, unit=" m (must fit the channel)")
+        check_range("tube_inner_diameter", self.tube_inner_diameter, 0.0, self.tube_outer_diameter, hi_open=True, unit=" m")
+        rim = (self.outer_diameter - self.tendon_channel_diameter) / 2
+        check_range("tendon_offset", self.tendon_offset, 0.0, float(rim), unit=" m (tendon channels inside the body)")
+        if float(self.area_silicone) <= 0:
+            raise ValueError(f"the silicone cross-section area {float(self.area_silicone):g} m^2 is not positive: channels larger than the body")
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> Robot:
+        """Reads a robot from a TOML file of Robot field names in SI units (missing ones default).
+
+        Raises:
+            ValueError: the file cannot be read or parsed, has unknown keys or bad values.
+        """
+        path = Path(path)
+        try:
+            data = tomllib.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+            raise ValueError(f"cannot read robot file {path}: {e}") from e
+        data = data.get("robot", data)
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"robot file {path}: unknown field(s) {unknown}; allowed: {sorted(known)}")
+        try:
+            return cls(**data)
+        except ValueError as e:
+            raise ValueError(f"robot file {path}: {e}") from e
+
+    @property
+    def n_tendons(self) -> int:
+        return int(np.shape(self.tendon_angles)[0])
+
+    @property
+    def tendon_positions(self):
+        """Body-frame tendon offsets r_t, shape (n_tendons, 3) [m]."""
+        a = jnp.asarray(self.tendon_angles)
+        return self.tendon_offset * jnp.stack([jnp.cos(a), jnp.sin(a), jnp.zeros_like(a)], axis=-1)
+
+    @property
+    def area_silicone(self):
+        """Silicone area A1: outer disc minus tube channel and tendon channels [m^2]."""
+        holes = self.n_tendons * self.tendon_channel_diameter**2
+        return jnp.pi / 4 * (self.outer_diameter**2 - self.channel_diameter**2 - holes)
+
+    @property
+    def second_moments_silicone(self):
+        """(I_x, I_y) of the silicone section, tendon channels by the parallel-axis theorem [m^4]."""
+        disc = jnp.pi / 64 * (self.outer_diameter**4 - self.channel_diameter**4)
+        dt = self.tendon_channel_diameter
+        r = self.tendon_positions
+        own = jnp.pi / 64 * dt**4
+        hole_area = jnp.pi / 4 * dt**2
+        I_x = disc - jnp.sum(own + hole_area * r[:, 1] ** 2)
+        I_y = disc - jnp.sum(own + hole_area * r[:, 0] ** 2)
+        return I_x, I_y
+
+    @property
+    def area_tube(self):
+        return jnp.pi / 4 * (self.tube_outer_diameter**2 - self.tube_inner_diameter**2)
+
+    @property
+    def second_moment_tube(self):
+        return jnp.pi / 64 * (self.tube_outer_diameter**4 - self.tube_inner_diameter**4)
+
+    @property
+    def G_silicone(self):
+        return self.E_silicone / (2 * (1 + self.nu_silicone))
+
+    def shear_stiffness(self):
+        """K_se = diag(G1 A1, G1 A1, E1 A1) of the silicone [N] (model-notes)."""
+        A = self.area_silicone
+        return jnp.stack([self.G_silicone * A, self.G_silicone * A, self.E_silicone * A])
+
+    def bending_stiffness(self, with_tube: bool):
+        """K_bt diagonal [N m^2]: diag(E1 I1, E1 I1, G1 J1), plus E2 I2 in bending with the tube (eq. 30)."""
+        I_x, I_y = self.second_moments_silicone
+        extra = self.E_tube * self.second_moment_tube if with_tube else 0.0
+        return jnp.stack([self.E_silicone * I_x + extra, self.E_silicone * I_y + extra, self.G_silicone * (I_x + I_y)])
+
+    def linear_density(self, with_tube: bool):
+        """Mass per unit length [kg/m] of the silicone, plus the tube where it is inserted."""
+        rho = self.density_silicone * self.area_silicone
+        return rho + self.density_tube * self.area_tube if with_tube else rho

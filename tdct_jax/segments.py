@@ -1,0 +1,148 @@
+"""The two Cosserat segments as pure vector fields (paper eqs. 1 and 23-30, model-notes).
+
+Both segments carry the same state: position p, rotation R (body to world), and the *total*
+internal force N = n + sum_t tau_t t_t and moment N = m + sum_t (R r_t) x tau_t t_t of rod plus
+tendons, in the world frame (n, m: the rod's own; t_t: tendon t's unit tangent). Tendon forces
+are internal to rod plus tendons, so
+
+    N' = -f,        M' = -p' x N - l,                       f = rho g (gravity), l = 0,
+
+which is the Rucker-Webster model (eq. 1) and the backbone model (eqs. 23-26) before they are
+differentiated into a linear system for the strains: given (R, N, M), the strains (v, u) solve the
+constitutive relations
+
+    R^T N = K_se (v - e3) + sum_t tau_t pb_t / |pb_t|,
+    R^T M = K_bt u        + sum_t tau_t r_t x pb_t / |pb_t|,     pb_t = u x r_t + v,
+
+by a few Newton steps (their Jacobian is the symmetric matrix of eq. 1). In the backbone segment
+the tube forbids shear: v = (0, 0, v_z), and the two shear rows of the force relation drop out
+(eqs. 16-17). Written this way the balanced transition is plain continuity of the state, the tip
+condition is N(L) = F_e, M(L) = M_e, and RK4 conserves the global force balance exactly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from .so3 import hat
+
+E3 = jnp.array([0.0, 0.0, 1.0])
+
+
+class State(NamedTuple):
+    """Rod state along s: p (3,) [m], R (3, 3), total force N (3,) [N], total moment M (3,) [N m]."""
+
+    p: jax.Array
+    R: jax.Array
+    N: jax.Array
+    M: jax.Array
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Segment:
+    """One segment's section and tendons.
+
+    Attributes:
+        K_se: shear/extension stiffness diagonal [N], (3,).
+        K_bt: bending/torsion stiffness diagonal [N m^2], (3,).
+        rho: linear density [kg/m].
+        tau: tendon tensions [N], (n_t,).
+        r: body-frame tendon offsets [m], (n_t, 3).
+        backbone: the tube is inside (no shear). Static.
+        tilt: tendon tangents follow pb_t = u x r_t + v ("exact"); False uses t_t = e3, the printed
+            eqs. 21-22 ("paper" backbone option). Static.
+    """
+
+    K_se: jax.Array
+    K_bt: jax.Array
+    rho: jax.Array
+    tau: jax.Array
+    r: jax.Array
+    backbone: bool = dataclasses.field(metadata=dict(static=True))
+    tilt: bool = dataclasses.field(metadata=dict(static=True), default=True)
+
+
+NEWTON_STEPS = 3
+"""Newton steps on the constitutive relations; from the tilt-free guess, 3 reach round-off."""
+
+
+def tendon_tangents(seg: Segment, v, u):
+    """Body-frame unit tangents t_t of the tendons, (n_t, 3)."""
+    if not seg.tilt:
+        return jnp.broadcast_to(E3, seg.r.shape)
+    pb = jnp.cross(u, seg.r) + v
+    return pb / jnp.linalg.norm(pb, axis=-1, keepdims=True)
+
+
+def strains(seg: Segment, R, N, M):
+    """Solves the constitutive relations for (v, u) given the world-frame totals N, M."""
+    bf, bm = R.T @ N, R.T @ M
+    tau = seg.tau
+    v = E3 + (bf - jnp.sum(tau) * E3) / seg.K_se
+    if seg.backbone:
+        v = v * E3
+    u = (bm - jnp.sum(tau[:, None] * jnp.cross(seg.r, E3), axis=0)) / seg.K_bt
+    if not seg.tilt:
+        return v, u
+    rh = hat(seg.r)
+    for _ in range(NEWTON_STEPS):
+        pb = jnp.cross(u, seg.r) + v
+        norm = jnp.linalg.norm(pb, axis=-1)
+        t = pb / norm[:, None]
+        F_f = seg.K_se * (v - E3) + tau @ t - bf
+        F_m = seg.K_bt * u + tau @ jnp.cross(seg.r, t) - bm
+        P = (tau / norm)[:, None, None] * (jnp.eye(3) - t[:, :, None] * t[:, None, :])
+        PW = P @ rh
+        J = jnp.block(
+            [
+                [jnp.diag(seg.K_se) + P.sum(0), -PW.sum(0)],
+                [(rh @ P).sum(0), jnp.diag(seg.K_bt) - (rh @ PW).sum(0)],
+            ]
+        )
+        F = jnp.concatenate([F_f, F_m])
+        if seg.backbone:
+            J = J.at[:2].set(jnp.eye(6)[:2])
+            F = F.at[:2].set(0.0)
+        dw = jnp.linalg.solve(J, -F)
+        v, u = v + dw[:3], u + dw[3:]
+    return v, u
+
+
+def rod_force(seg: Segment, y: State, v, u):
+    """The rod's own internal force n and moment m (world frame) from the totals."""
+    t = tendon_tangents(seg, v, u)
+    f_t = seg.tau[:, None] * t
+    n = y.N - y.R @ jnp.sum(f_t, 0)
+    m = y.M - y.R @ jnp.sum(jnp.cross(seg.r, f_t), 0)
+    return n, m
+
+
+def vector_field(seg: Segment, gravity):
+    """d/ds of the State for one segment; ``gravity`` [m/s^2] in the world frame."""
+
+    def f(s, y: State) -> State:
+        v, u = strains(seg, y.R, y.N, y.M)
+        dp = y.R @ v
+        dM = -jnp.cross(dp, y.N)
+        if not seg.tilt:
+            # eq. 26 as printed is not the derivative of a total moment; this is what it adds
+            # (zero unless the robot twists, model-notes).
+            dM = dM - y.R @ jnp.sum(seg.tau[:, None] * jnp.cross(E3, jnp.cross(u, seg.r)), 0)
+        return State(dp, y.R @ hat(u), -seg.rho * gravity, dM)
+
+    return f
+
+
+def paper_transition(back: Segment, sil: Segment, y: State) -> State:
+    """Eqs. 31-36 as printed: the rod's n, m continuous, so the total force jumps by the tendons'."""
+    v, u = strains(back, y.R, y.N, y.M)
+    n, m = rod_force(back, y, v, u)
+    v1 = E3 + (y.R.T @ n) / sil.K_se
+    u1 = (y.R.T @ m) / sil.K_bt
+    f_t = sil.tau[:, None] * tendon_tangents(sil, v1, u1)
+    return State(y.p, y.R, n + y.R @ jnp.sum(f_t, 0), m + y.R @ jnp.sum(jnp.cross(sil.r, f_t), 0))

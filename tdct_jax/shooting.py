@@ -1,0 +1,324 @@
+"""Shooting: the tip residual, a globalised Newton loop, implicit differentiation, and solve()."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from ._checks import as_array, check_range, is_concrete
+from .integrate import rk4
+from .loads import STANDARD_GRAVITY, Actuation, TipLoad
+from .robot import Robot
+from .segments import E3, Segment, State, paper_transition, rod_force, strains, vector_field
+from .so3 import orthonormalize, tip_angle
+
+TRANSITIONS = ("balanced", "paper")
+TENDON_MODELS = ("exact", "paper")
+
+
+@dataclasses.dataclass(frozen=True)
+class SolverOptions:
+    """How to compute (static: each distinct value compiles once).
+
+    Attributes:
+        steps: RK4 steps per segment (backbone [0, d] and silicone-only [d, L]).
+        transition: "balanced" (total rod + tendon force and moment continuous at s = d) or
+            "paper" (rod force and moment continuous, eqs. 31-32 as printed).
+        tendon_model: tendon load in the backbone segment, "exact" (Rucker-Webster, tangents
+            tilted by u x r_t) or "paper" (eqs. 21-22 as printed).
+        tol: convergence threshold on the scaled tip residual (max norm).
+        max_iter: Newton iterations at most.
+    """
+
+    steps: int = 50
+    transition: str = "balanced"
+    tendon_model: str = "exact"
+    tol: float = 1e-10
+    max_iter: int = 50
+
+    def __post_init__(self):
+        if not isinstance(self.steps, (int, np.integer)) or self.steps < 1:
+            raise ValueError(f"steps = {self.steps!r} must be an integer >= 1")
+        if self.transition not in TRANSITIONS:
+            raise ValueError(f"transition = {self.transition!r} must be one of {TRANSITIONS}")
+        if self.tendon_model not in TENDON_MODELS:
+            raise ValueError(f"tendon_model = {self.tendon_model!r} must be one of {TENDON_MODELS}")
+        check_range("tol", self.tol, 0.0, lo_open=True)
+        if not isinstance(self.max_iter, (int, np.integer)) or self.max_iter < 1:
+            raise ValueError(f"max_iter = {self.max_iter!r} must be an integer >= 1")
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Solution:
+    """Static shape of the robot at the RK4 nodes (2 * steps + 1 of them, s = d appears once).
+
+    Attributes:
+        s: arc length of the undeformed robot [m], (n,).
+        position: p(s) [m], world frame, (n, 3).
+        rotation: R(s), body to world, (n, 3, 3).
+        force, moment: the rod's internal force n(s) [N] and moment m(s) [N m], world frame.
+        total_force, total_moment: rod plus tendons, N(s) and M(s); at s = 0 the load on the base.
+        strain, curvature: v(s) and u(s) [1/m], body frame.
+        residual: scaled tip residual (force rows, then moment rows), (6,).
+        residual_norm: its max norm; converged: residual_norm <= tol; iterations: Newton steps.
+    """
+
+    s: jax.Array
+    position: jax.Array
+    rotation: jax.Array
+    force: jax.Array
+    moment: jax.Array
+    total_force: jax.Array
+    total_moment: jax.Array
+    strain: jax.Array
+    curvature: jax.Array
+    residual: jax.Array
+    residual_norm: jax.Array
+    converged: jax.Array
+    iterations: jax.Array
+
+    @property
+    def tip_position(self):
+        """p(L) [m], (3,)."""
+        return self.position[..., -1, :]
+
+    @property
+    def tip_rotation(self):
+        """R(L), (3, 3)."""
+        return self.rotation[..., -1, :, :]
+
+    @property
+    def tip_angle(self):
+        """theta_tip: the tip tangent's angle in the z-y plane from +z, toward +y [rad]."""
+        return tip_angle(self.tip_rotation)
+
+
+class ConvergenceError(RuntimeError):
+    """The shooting iteration did not reach the tolerance (raised by solve(..., throw=True))."""
+
+
+def segments(robot: Robot, act: Actuation, opts: SolverOptions) -> tuple[Segment, Segment]:
+    """The backbone [0, d] and silicone-only [d, L] segments."""
+    tau = jnp.asarray(act.tensions)
+    r = robot.tendon_positions
+    K_se = robot.shear_stiffness()
+    back = Segment(K_se, robot.bending_stiffness(True), robot.linear_density(True), tau, r, True, opts.tendon_model == "exact")
+    sil = Segment(K_se, robot.bending_stiffness(False), robot.linear_density(False), tau, r, False)
+    return back, sil
+
+
+def _scale(robot, act, load, gravity):
+    """A typical force [N] that scales the residual: tensions, tip load and weight together."""
+    weight = jnp.linalg.norm(gravity) * (robot.linear_density(False) * robot.length + robot.density_tube * robot.area_tube * act.insertion)
+    F = jnp.sum(act.tensions) + jnp.linalg.norm(load.force) + jnp.linalg.norm(load.moment) / robot.length + weight
+    return jnp.maximum(F, 1e-3)
+
+
+def _straight_guess(robot, act, load, gravity, F_c):
+    """Base unknowns of the straight rod: exact in force, first-order in moment."""
+    L, d = robot.length, act.insertion
+    rho1, rho2 = robot.linear_density(False), robot.density_tube * robot.area_tube
+    N0 = load.force + gravity * (rho1 * L + rho2 * d)
+    M0 = load.moment + jnp.cross(L * E3, load.force) + jnp.cross(E3, gravity) * (rho1 * L**2 + rho2 * d**2) / 2
+    return jnp.concatenate([N0 / F_c, M0 / (F_c * L)])
+
+
+def _integrate(robot, act, load, gravity, opts, x, path=False):
+    """Shoots from base unknowns x (scaled N(0), M(0)) to the tip; returns (residual, states)."""
+    back, sil = segments(robot, act, opts)
+    L, d = robot.length, act.insertion
+    F_c = _scale(robot, act, load, gravity)
+    y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:] * F_c * L)
+
+    def project(y):
+        return y._replace(R=orthonormalize(y.R))
+
+    def run(seg, y, s0, s1):
+        return rk4(vector_field(seg, gravity), y, s0, s1, opts.steps, project, path)
+
+    out_b = run(back, y0, 0.0, d)
+    y_d = out_b[0] if path else out_b
+    if opts.transition == "paper":
+        jumped = paper_transition(back, sil, y_d)
+        inside = (d > 0) & (d < L)
+        y_d = jax.tree.map(lambda a, b: jnp.where(inside, a, b), jumped, y_d)
+    out_s = run(sil, y_d, d, L)
+    y_L = out_s[0] if path else out_s
+    res = jnp.concatenate([(y_L.N - load.force) / F_c, (y_L.M - load.moment) / (F_c * L)])
+    if not path:
+        return res, None
+    ys = jax.tree.map(lambda a, b: jnp.concatenate([a, b[1:]]), out_b[1], out_s[1])
+    return res, ys
+
+
+def _newton(F, x0, tol, max_iter):
+    """Levenberg-Marquardt-damped Newton on F(x) = 0 with exact jacfwd Jacobians.
+
+    The damping mu shrinks tenfold after each step that lowers |F| and grows tenfold after each
+    that does not, so the iteration is Newton's (quadratic) near the root and a short
+    gradient step far from it. The first pass evaluates x0 itself, so the Jacobian code appears
+    once in the compiled loop. Returns the root and (residual, Newton steps taken).
+    """
+
+    def value_and_jac(x):
+        def fr(x):
+            r = F(x)
+            return r, r
+
+        return jax.jacfwd(fr, has_aux=True)(x)
+
+    def not_done(c):
+        x, r, J, mu, it, x_try = c
+        return (it == 0) | ((it <= max_iter) & (jnp.max(jnp.abs(r)) > tol))
+
+    def body(c):
+        x, r, J, mu, it, x_try = c
+        J_try, r_try = value_and_jac(x_try)
+        ok = jnp.all(jnp.isfinite(r_try)) & (jnp.sum(r_try**2) < jnp.sum(r**2))
+        x, r, J = (jnp.where(ok, new, old) for new, old in ((x_try, x), (r_try, r), (J_try, J)))
+        mu = jnp.where(ok, mu / 10, mu * 10)
+        x_try = x - jnp.linalg.solve(J.T @ J + mu * jnp.eye(x.size), J.T @ r)
+        return x, r, J, mu, it + 1, x_try
+
+    n = x0.size
+    init = (x0, jnp.full(n, jnp.inf), jnp.eye(n), jnp.asarray(1e-5), 0, x0)
+    x, r, _, _, it, _ = lax.while_loop(not_done, body, init)
+    return x, (r, it - 1)
+
+
+def _tangent_solve(g, y):
+    return jnp.linalg.solve(jax.jacfwd(g)(y), y)
+
+
+@jax.jit(static_argnames=("opts",))
+def _solve(robot, act, load, gravity, opts: SolverOptions) -> Solution:
+    F_c = _scale(robot, act, load, gravity)
+    x0 = _straight_guess(robot, act, load, gravity, F_c)
+
+    def F(x):
+        return _integrate(robot, act, load, gravity, opts, x)[0]
+
+    def newton(F, x0):
+        return _newton(F, x0, opts.tol, opts.max_iter)
+
+    x, (_, iterations) = lax.custom_root(F, x0, newton, _tangent_solve, has_aux=True)
+    res, ys = _integrate(robot, act, load, gravity, opts, x, path=True)
+    return _assemble(robot, act, opts, ys, res, iterations)
+
+
+def _node_quantities(back: Segment, sil: Segment, y: State, in_backbone):
+    """Strains v, u and rod force n, m at one node, by the segment the node belongs to."""
+
+    def with_segment(seg):
+        v, u = strains(seg, y.R, y.N, y.M)
+        return (v, u, *rod_force(seg, y, v, u))
+
+    return jax.tree.map(lambda a, b: jnp.where(in_backbone, a, b), with_segment(back), with_segment(sil))
+
+
+def _assemble(robot, act, opts, ys: State, res, iterations) -> Solution:
+    """Solution from the node states: strains and rod forces by each node's own segment."""
+    back, sil = segments(robot, act, opts)
+    n_b = opts.steps + 1
+    d, L = act.insertion, robot.length
+    s = jnp.concatenate([jnp.linspace(0.0, 1.0, n_b) * d, d + jnp.linspace(0.0, 1.0, n_b)[1:] * (L - d)])
+    in_backbone = jnp.where(jnp.arange(s.size) < n_b, d > 0, d >= L)
+
+    v, u, n, m = jax.vmap(lambda y, b: _node_quantities(back, sil, y, b))(ys, in_backbone)
+    r_norm = jnp.max(jnp.abs(res))
+    return Solution(
+        s=s,
+        position=ys.p,
+        rotation=ys.R,
+        force=n,
+        moment=m,
+        total_force=ys.N,
+        total_moment=ys.M,
+        strain=v,
+        curvature=u,
+        residual=res,
+        residual_norm=r_norm,
+        converged=r_norm <= opts.tol,
+        iterations=iterations,
+    )
+
+
+def solve(
+    robot: Robot,
+    act: Actuation,
+    load: TipLoad | None = None,
+    *,
+    steps: int = 50,
+    gravity=STANDARD_GRAVITY,
+    transition: str = "balanced",
+    tendon_model: str = "exact",
+    tol: float = 1e-10,
+    max_iter: int = 50,
+    throw: bool = False,
+) -> Solution:
+    """Static shape of the TDCT robot (paper Sec. II; model-notes) by Newton shooting.
+
+    The six unknowns are the total force and moment at the base, started from the straight rod.
+    Derivatives of every output with respect to every input (robot fields, tensions, insertion,
+    tip load, gravity) come from implicit differentiation of the converged root, so ``jax.grad``,
+    ``jax.jacfwd`` and ``jax.vmap`` pass straight through.
+
+    Args:
+        robot: geometry and materials.
+        act: tendon tensions [N] and tube insertion depth [m].
+        load: tip force [N] and moment [N m] in the world frame; none by default.
+        steps: RK4 steps per segment.
+        gravity: world gravity [m/s^2]; None or zeros switch the robot's weight off.
+        transition: "balanced" (default) or "paper", see SolverOptions.
+        tendon_model: "exact" (default) or "paper", see SolverOptions.
+        tol: tolerance on the scaled tip residual.
+        max_iter: most Newton iterations.
+        throw: raise ConvergenceError if the solve did not converge (needs concrete values).
+
+    Returns:
+        Solution; check ``converged`` unless ``throw`` is set.
+
+    Raises:
+        ValueError: bad input (names field, value and allowed range).
+        ConvergenceError: with ``throw=True``, when the residual stays above ``tol``.
+    """
+    opts = SolverOptions(steps=steps, transition=transition, tendon_model=tendon_model, tol=tol, max_iter=max_iter)
+    load = TipLoad() if load is None else load
+    gravity = jnp.zeros(3) if gravity is None else as_array("gravity", gravity, (3,))
+    check_inputs(robot, act, load)
+    sol = _solve(robot, act, load, gravity, opts)
+    if throw:
+        raise_if_failed(sol, opts)
+    return sol
+
+
+def check_inputs(robot: Robot, act: Actuation, load: TipLoad) -> None:
+    """Cross-checks between robot and actuation that the pytrees cannot make alone."""
+    for name, obj, cls in (("robot", robot, Robot), ("act", act, Actuation), ("load", load, TipLoad)):
+        if not isinstance(obj, cls):
+            raise TypeError(f"{name} must be a tdct.{cls.__name__}, got {type(obj).__name__}")
+    if np.shape(act.tensions)[-1:] != (robot.n_tendons,):
+        raise ValueError(f"tensions has shape {np.shape(act.tensions)}: the robot has {robot.n_tendons} tendons, one tension each")
+    if is_concrete(act.insertion) and is_concrete(robot.length):
+        check_range("insertion", act.insertion, 0.0, float(robot.length), unit=f" m (0 to the robot length {float(robot.length):g} m)")
+
+
+def raise_if_failed(sol: Solution, opts: SolverOptions) -> None:
+    """Raises ConvergenceError naming the residual that did not converge."""
+    if isinstance(sol.converged, jax.core.Tracer):
+        raise ValueError("throw=True needs concrete values; under jit or vmap use throw=False and check sol.converged")
+    if bool(np.all(sol.converged)):
+        return
+    res = np.abs(np.asarray(sol.residual)).reshape(-1, 6).max(axis=0)
+    worst = int(np.argmax(res))
+    which = ("tip force", "tip moment")[worst // 3] + " " + "xyz"[worst % 3]
+    raise ConvergenceError(
+        f"shooting did not converge: scaled {which} residual {res[worst]:.3g} > tol {opts.tol:g} after "
+        f"{int(np.max(sol.iterations))} iterations; raise max_iter (now {opts.max_iter}), check the inputs, "
+        "or solve a nearby configuration first"
+    )

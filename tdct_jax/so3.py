@@ -1,0 +1,26 @@
+"""Rotation helpers: skew matrices and the projection that keeps R on SO(3). No physics."""
+
+import jax.numpy as jnp
+
+
+def hat(x):
+    """Skew matrix x^ with x^ y = x cross y; x has shape (..., 3)."""
+    x0, x1, x2 = x[..., 0], x[..., 1], x[..., 2]
+    z = jnp.zeros_like(x0)
+    return jnp.stack(
+        [jnp.stack([z, -x2, x1], -1), jnp.stack([x2, z, -x0], -1), jnp.stack([-x1, x0, z], -1)], -2
+    )
+
+
+def orthonormalize(R):
+    """One Newton-Schulz step toward the nearest rotation: R (3 I - R^T R) / 2.
+
+    An RK4 step leaves R off SO(3) by O(h^5); one step squares that error, so applied after every
+    step it holds |R^T R - I| at round-off without changing the integrator's order.
+    """
+    return R @ (1.5 * jnp.eye(3) - 0.5 * (R.T @ R))
+
+
+def tip_angle(R):
+    """Angle of the tangent R e3 in the world z-y plane from +z, positive toward +y [rad]."""
+    return jnp.arctan2(R[..., 1, 2], R[..., 2, 2])
