@@ -113,7 +113,11 @@ def segments(robot: Robot, act: Actuation, opts: SolverOptions) -> tuple[Segment
 
 
 def _scale(robot, act, load, gravity):
-    """A typical force [N] that scales the residual: tensions, tip load and weight together."""
+    """A typical force [N] that scales the residual: tensions, tip load and weight together.
+
+    A constant for differentiation: it only reparametrises the unknowns.
+    """
+    robot, act, load, gravity = lax.stop_gradient((robot, act, load, gravity))
     weight = jnp.linalg.norm(gravity) * (robot.linear_density(False) * robot.length + robot.density_tube * robot.area_tube * act.insertion)
     F = jnp.sum(act.tensions) + jnp.linalg.norm(load.force) + jnp.linalg.norm(load.moment) / robot.length + weight
     return jnp.maximum(F, 1e-3)
@@ -188,7 +192,7 @@ def _newton(F, x0, tol, max_iter):
     n = x0.size
     init = (x0, jnp.full(n, jnp.inf), jnp.eye(n), jnp.asarray(1e-5), 0, x0)
     x, r, _, _, it, _ = lax.while_loop(not_done, body, init)
-    return x, (r, it - 1)
+    return x, (r, (it - 1).astype(x.dtype))  # float: custom_root's aux must take float tangents
 
 
 def _tangent_solve(g, y):
@@ -208,7 +212,7 @@ def _solve(robot, act, load, gravity, opts: SolverOptions) -> Solution:
 
     x, (_, iterations) = lax.custom_root(F, x0, newton, _tangent_solve, has_aux=True)
     res, ys = _integrate(robot, act, load, gravity, opts, x, path=True)
-    return _assemble(robot, act, opts, ys, res, iterations)
+    return _assemble(robot, act, opts, ys, res, iterations.astype(jnp.int32))
 
 
 def _node_quantities(back: Segment, sil: Segment, y: State, in_backbone):
@@ -229,7 +233,7 @@ def _assemble(robot, act, opts, ys: State, res, iterations) -> Solution:
     s = jnp.concatenate([jnp.linspace(0.0, 1.0, n_b) * d, d + jnp.linspace(0.0, 1.0, n_b)[1:] * (L - d)])
     in_backbone = jnp.where(jnp.arange(s.size) < n_b, d > 0, d >= L)
 
-    v, u, n, m = jax.vmap(lambda y, b: _node_quantities(back, sil, y, b))(ys, in_backbone)
+    v, u, n, m = lax.map(lambda a: _node_quantities(back, sil, *a), (ys, in_backbone))
     r_norm = jnp.max(jnp.abs(res))
     return Solution(
         s=s,

@@ -1,0 +1,94 @@
+"""Command-line tool ``tdct``: millimetres, grams and degrees at the edges, SI inside."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import numpy as np
+
+from .loads import STANDARD_GRAVITY, Actuation, TipLoad
+from .robot import Robot
+from .shooting import ConvergenceError, SolverOptions, raise_if_failed, solve
+
+
+def _floats(n: int | None = None):
+    def parse(text: str):
+        try:
+            values = tuple(float(x) for x in text.split(","))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+        if n is not None and len(values) != n:
+            raise argparse.ArgumentTypeError(f"expected {n} comma-separated numbers, got {len(values)} in {text!r}")
+        return values
+
+    return parse
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="tdct", description="Statics of the TDCT soft robot (tdct_jax).")
+    verbs = parser.add_subparsers(dest="verb", required=True)
+    p = verbs.add_parser("solve", help="solve one static shape and print the tip pose")
+    p.add_argument("--tensions", type=_floats(), default=(0.0, 0.0, 0.0, 0.0), help="tendon tensions in N, tendon 1 first (default 0,0,0,0)")
+    p.add_argument("--insertion-mm", type=float, default=0.0, help="Nitinol tube insertion depth in mm (default 0)")
+    tip = p.add_mutually_exclusive_group()
+    tip.add_argument("--tip-mass-g", type=float, help="tip mass in grams, hanging under standard gravity (-y)")
+    tip.add_argument("--tip-force", type=_floats(3), metavar="FX,FY,FZ", help="tip force in N, world frame")
+    p.add_argument("--tip-moment", type=_floats(3), default=(0.0, 0.0, 0.0), metavar="MX,MY,MZ", help="tip moment in N m, world frame")
+    p.add_argument("--no-gravity", action="store_true", help="ignore the robot's own weight")
+    p.add_argument("--robot", metavar="robot.toml", help="TOML file of Robot fields in SI units")
+    p.add_argument("--steps", type=int, default=50, help="RK4 steps per segment (default 50)")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    p.add_argument("--plot", metavar="shape.png", help="save a side view and a 3D view of the shape")
+    p.add_argument("--csv", metavar="shape.csv", help="save the shape as s_mm,x_mm,y_mm,z_mm")
+    return parser
+
+
+def _solve_command(args) -> int:
+    robot = Robot.from_toml(args.robot) if args.robot else Robot()
+    act = Actuation(tensions=args.tensions, insertion=args.insertion_mm * 1e-3)
+    if args.tip_mass_g is not None:
+        load = TipLoad(force=TipLoad.from_mass(args.tip_mass_g * 1e-3).force, moment=args.tip_moment)
+    else:
+        load = TipLoad(force=args.tip_force or (0.0, 0.0, 0.0), moment=args.tip_moment)
+    sol = solve(robot, act, load, steps=args.steps, gravity=None if args.no_gravity else STANDARD_GRAVITY)
+    tip_mm = np.asarray(sol.tip_position) * 1e3
+    angle = float(np.degrees(sol.tip_angle))
+    converged, res, iters = bool(sol.converged), float(sol.residual_norm), int(sol.iterations)
+    if args.json:
+        shape = {"s_mm": (np.asarray(sol.s) * 1e3).tolist(), "position_mm": (np.asarray(sol.position) * 1e3).tolist()}
+        out = dict(tip_position_mm=tip_mm.tolist(), tip_angle_deg=angle, converged=converged, residual_norm=res, iterations=iters, shape=shape)
+        print(json.dumps(out))
+    else:
+        print(f"tip position [mm]: x = {tip_mm[0]:.3f}, y = {tip_mm[1]:.3f}, z = {tip_mm[2]:.3f}")
+        print(f"tip angle [deg]:   {angle:.3f}")
+        print(f"converged:         {'yes' if converged else 'NO'} (scaled residual {res:.2e}, {iters} Newton iterations)")
+    if args.csv:
+        table = np.column_stack([np.asarray(sol.s), np.asarray(sol.position)]) * 1e3
+        np.savetxt(args.csv, table, delimiter=",", header="s_mm,x_mm,y_mm,z_mm", comments="", fmt="%.9g")
+    if args.plot:
+        from .plotting import plot_shape
+
+        title = f"tensions {', '.join(f'{t:g}' for t in args.tensions)} N, insertion {args.insertion_mm:g} mm"
+        plot_shape(sol, act.insertion, args.plot, title=title)
+    try:
+        raise_if_failed(sol, SolverOptions(steps=args.steps))
+    except ConvergenceError as e:
+        print(f"tdct: error: {e}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit code (0 ok, 1 not converged, 2 bad input)."""
+    args = _parser().parse_args(argv)
+    try:
+        return _solve_command(args)
+    except ValueError as e:
+        print(f"tdct: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,66 @@
+"""Figures (the only module that imports matplotlib). Axes in millimetres and degrees."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .shooting import Solution
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, title: str | None = None):
+    """Side view (world z-y plane) and 3D view of one solved shape; the tube part drawn thick.
+
+    Args:
+        sol: a single (unbatched) Solution.
+        insertion: tube insertion depth d [m], to mark the backbone segment [0, d].
+        path: where to save a PNG; the figure is returned either way.
+        title: figure title.
+    """
+    plt = _pyplot()
+    p = np.asarray(sol.position) * 1e3
+    tube = np.asarray(sol.s) <= insertion + 1e-12 if insertion > 0 else np.zeros(len(p), bool)
+    fig = plt.figure(figsize=(11, 4.6))
+    ax = fig.add_subplot(1, 2, 1)
+    ax.plot(p[:, 2], p[:, 1], color="tab:blue", lw=2, label="silicone only")
+    if tube.any():
+        ax.plot(p[tube, 2], p[tube, 1], color="black", lw=4, label=f"with Nitinol tube (d = {insertion * 1e3:.0f} mm)")
+    ax.plot(*p[-1, [2, 1]], "o", color="tab:red", label="tip")
+    ax.axhline(0, color="0.8", lw=0.8, zorder=0)
+    ax.set_xlabel("z [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_title(f"side view: tip angle {np.degrees(float(sol.tip_angle)):.1f} deg")
+    ax.legend(loc="best", fontsize=8)
+    ax.grid(alpha=0.3)
+    ax3 = fig.add_subplot(1, 2, 2, projection="3d")
+    ax3.plot(p[:, 0], p[:, 2], p[:, 1], color="tab:blue", lw=2)
+    if tube.any():
+        ax3.plot(p[tube, 0], p[tube, 2], p[tube, 1], color="black", lw=4)
+    ax3.scatter(*p[-1, [0, 2, 1]], color="tab:red")
+    ax3.set_xlabel("x [mm]")
+    ax3.set_ylabel("z [mm]")
+    ax3.set_zlabel("y [mm]")
+    span = max(np.ptp(p, axis=0).max(), 1.0) / 2
+    mid = (p.max(0) + p.min(0)) / 2
+    ax3.set_xlim(mid[0] - span, mid[0] + span)
+    ax3.set_ylim(mid[2] - span, mid[2] + span)
+    ax3.set_zlim(mid[1] - span, mid[1] + span)
+    ax3.set_title("3D (gravity along -y)")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+    return fig
