@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import math
 
+import jax
 import numpy as np
 
 
 def is_concrete(x) -> bool:
-    """True for plain numbers and numpy arrays (values a user typed), False for tracers."""
-    return isinstance(x, (int, float, np.ndarray, np.generic, list, tuple))
+    """True for values a user passed in; False for tracers and the placeholders pytrees carry."""
+    return not isinstance(x, jax.core.Tracer) and x is not None and type(x) is not object
 
 
 def as_array(name: str, x, shape: tuple[int, ...] | None = None):

@@ -10,7 +10,7 @@ import numpy as np
 
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .robot import Robot
-from .shooting import ConvergenceError, SolverOptions, raise_if_failed, solve
+from .shooting import MAX_ITER, TOL, ConvergenceError, raise_if_failed, solve
 
 
 def _floats(n: int | None = None):
@@ -30,12 +30,16 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tdct", description="Statics of the TDCT soft robot (tdct_jax).")
     verbs = parser.add_subparsers(dest="verb", required=True)
     p = verbs.add_parser("solve", help="solve one static shape and print the tip pose")
-    p.add_argument("--tensions", type=_floats(), default=(0.0, 0.0, 0.0, 0.0), help="tendon tensions in N, tendon 1 first (default 0,0,0,0)")
+    p.add_argument(
+        "--tensions", type=_floats(), default=(0.0, 0.0, 0.0, 0.0), help="tendon tensions in N, tendon 1 first (default 0,0,0,0)"
+    )
     p.add_argument("--insertion-mm", type=float, default=0.0, help="Nitinol tube insertion depth in mm (default 0)")
     tip = p.add_mutually_exclusive_group()
     tip.add_argument("--tip-mass-g", type=float, help="tip mass in grams, hanging under standard gravity (-y)")
     tip.add_argument("--tip-force", type=_floats(3), metavar="FX,FY,FZ", help="tip force in N, world frame")
-    p.add_argument("--tip-moment", type=_floats(3), default=(0.0, 0.0, 0.0), metavar="MX,MY,MZ", help="tip moment in N m, world frame")
+    p.add_argument(
+        "--tip-moment", type=_floats(3), default=(0.0, 0.0, 0.0), metavar="MX,MY,MZ", help="tip moment in N m, world frame"
+    )
     p.add_argument("--no-gravity", action="store_true", help="ignore the robot's own weight")
     p.add_argument("--robot", metavar="robot.toml", help="TOML file of Robot fields in SI units")
     p.add_argument("--steps", type=int, default=50, help="RK4 steps per segment (default 50)")
@@ -58,7 +62,14 @@ def _solve_command(args) -> int:
     converged, res, iters = bool(sol.converged), float(sol.residual_norm), int(sol.iterations)
     if args.json:
         shape = {"s_mm": (np.asarray(sol.s) * 1e3).tolist(), "position_mm": (np.asarray(sol.position) * 1e3).tolist()}
-        out = dict(tip_position_mm=tip_mm.tolist(), tip_angle_deg=angle, converged=converged, residual_norm=res, iterations=iters, shape=shape)
+        out = dict(
+            tip_position_mm=tip_mm.tolist(),
+            tip_angle_deg=angle,
+            converged=converged,
+            residual_norm=res,
+            iterations=iters,
+            shape=shape,
+        )
         print(json.dumps(out))
     else:
         print(f"tip position [mm]: x = {tip_mm[0]:.3f}, y = {tip_mm[1]:.3f}, z = {tip_mm[2]:.3f}")
@@ -73,7 +84,7 @@ def _solve_command(args) -> int:
         title = f"tensions {', '.join(f'{t:g}' for t in args.tensions)} N, insertion {args.insertion_mm:g} mm"
         plot_shape(sol, act.insertion, args.plot, title=title)
     try:
-        raise_if_failed(sol, SolverOptions(steps=args.steps))
+        raise_if_failed(sol, TOL, MAX_ITER)
     except ConvergenceError as e:
         print(f"tdct: error: {e}", file=sys.stderr)
         return 1

@@ -91,12 +91,21 @@ class Robot:
         if not all(is_concrete(getattr(self, f.name)) for f in dataclasses.fields(self)):
             return
         check_range("channel_diameter", self.channel_diameter, 0.0, self.outer_diameter, hi_open=True, unit=" m")
-        check_range("tube_outer_diameter", self.tube_outer_diameter, 0.0, self.channel_diameter, lo_open=True, unit=" m (must fit the channel)")
+        check_range(
+            "tube_outer_diameter",
+            self.tube_outer_diameter,
+            0.0,
+            self.channel_diameter,
+            lo_open=True,
+            unit=" m (must fit the channel)",
+        )
         check_range("tube_inner_diameter", self.tube_inner_diameter, 0.0, self.tube_outer_diameter, hi_open=True, unit=" m")
         rim = (self.outer_diameter - self.tendon_channel_diameter) / 2
         check_range("tendon_offset", self.tendon_offset, 0.0, float(rim), unit=" m (tendon channels inside the body)")
         if float(self.area_silicone) <= 0:
-            raise ValueError(f"the silicone cross-section area {float(self.area_silicone):g} m^2 is not positive: channels larger than the body")
+            raise ValueError(
+                f"the silicone cross-section area {float(self.area_silicone):g} m^2 is not positive: channels larger than the body"
+            )
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Robot:

@@ -75,8 +75,13 @@ def tendon_tangents(seg: Segment, v, u):
     """Body-frame unit tangents t_t of the tendons, (n_t, 3)."""
     if not seg.tilt:
         return jnp.broadcast_to(E3, seg.r.shape)
-    pb = jnp.cross(u, seg.r) + v
+    pb = _tendon_tangent(seg.r, v, u)
     return pb / jnp.linalg.norm(pb, axis=-1, keepdims=True)
+
+
+def _tendon_tangent(r, v, u):
+    """Unnormalised body-frame tendon tangents pb_t = u x r_t + v, (n_t, 3)."""
+    return jnp.cross(u[None], r) + v[None]
 
 
 def strains(seg: Segment, R, N, M):
@@ -86,17 +91,17 @@ def strains(seg: Segment, R, N, M):
     v = E3 + (bf - jnp.sum(tau) * E3) / seg.K_se
     if seg.backbone:
         v = v * E3
-    u = (bm - jnp.sum(tau[:, None] * jnp.cross(seg.r, E3), axis=0)) / seg.K_bt
+    u = (bm - jnp.sum(tau[:, None] * jnp.cross(seg.r, E3[None]), axis=0)) / seg.K_bt
     if not seg.tilt:
         return v, u
     rh = hat(seg.r)
     for _ in range(NEWTON_STEPS):
-        pb = jnp.cross(u, seg.r) + v
+        pb = _tendon_tangent(seg.r, v, u)
         norm = jnp.linalg.norm(pb, axis=-1)
         t = pb / norm[:, None]
         F_f = seg.K_se * (v - E3) + tau @ t - bf
         F_m = seg.K_bt * u + tau @ jnp.cross(seg.r, t) - bm
-        P = (tau / norm)[:, None, None] * (jnp.eye(3) - t[:, :, None] * t[:, None, :])
+        P = (tau / norm)[:, None, None] * (jnp.eye(3)[None] - t[:, :, None] * t[:, None, :])
         PW = P @ rh
         J = jnp.block(
             [
@@ -132,7 +137,7 @@ def vector_field(seg: Segment, gravity):
         if not seg.tilt:
             # eq. 26 as printed is not the derivative of a total moment; this is what it adds
             # (zero unless the robot twists, model-notes).
-            dM = dM - y.R @ jnp.sum(seg.tau[:, None] * jnp.cross(E3, jnp.cross(u, seg.r)), 0)
+            dM = dM - y.R @ jnp.sum(seg.tau[:, None] * jnp.cross(E3[None], jnp.cross(u[None], seg.r)), 0)
         return State(dp, y.R @ hat(u), -seg.rho * gravity, dM)
 
     return f

@@ -18,11 +18,15 @@ from .so3 import orthonormalize, tip_angle
 
 TRANSITIONS = ("balanced", "paper")
 TENDON_MODELS = ("exact", "paper")
+TOL = 1e-10
+"""Default convergence threshold on the scaled tip residual (max norm)."""
+MAX_ITER = 50
+"""Default limit on Newton iterations."""
 
 
 @dataclasses.dataclass(frozen=True)
 class SolverOptions:
-    """How to compute (static: each distinct value compiles once).
+    """The discrete model (static: each distinct value compiles once).
 
     Attributes:
         steps: RK4 steps per segment (backbone [0, d] and silicone-only [d, L]).
@@ -30,15 +34,11 @@ class SolverOptions:
             "paper" (rod force and moment continuous, eqs. 31-32 as printed).
         tendon_model: tendon load in the backbone segment, "exact" (Rucker-Webster, tangents
             tilted by u x r_t) or "paper" (eqs. 21-22 as printed).
-        tol: convergence threshold on the scaled tip residual (max norm).
-        max_iter: Newton iterations at most.
     """
 
     steps: int = 50
     transition: str = "balanced"
     tendon_model: str = "exact"
-    tol: float = 1e-10
-    max_iter: int = 50
 
     def __post_init__(self):
         if not isinstance(self.steps, (int, np.integer)) or self.steps < 1:
@@ -47,9 +47,6 @@ class SolverOptions:
             raise ValueError(f"transition = {self.transition!r} must be one of {TRANSITIONS}")
         if self.tendon_model not in TENDON_MODELS:
             raise ValueError(f"tendon_model = {self.tendon_model!r} must be one of {TENDON_MODELS}")
-        check_range("tol", self.tol, 0.0, lo_open=True)
-        if not isinstance(self.max_iter, (int, np.integer)) or self.max_iter < 1:
-            raise ValueError(f"max_iter = {self.max_iter!r} must be an integer >= 1")
 
 
 @jax.tree_util.register_dataclass
@@ -118,7 +115,9 @@ def _scale(robot, act, load, gravity):
     A constant for differentiation: it only reparametrises the unknowns.
     """
     robot, act, load, gravity = lax.stop_gradient((robot, act, load, gravity))
-    weight = jnp.linalg.norm(gravity) * (robot.linear_density(False) * robot.length + robot.density_tube * robot.area_tube * act.insertion)
+    weight = jnp.linalg.norm(gravity) * (
+        robot.linear_density(False) * robot.length + robot.density_tube * robot.area_tube * act.insertion
+    )
     F = jnp.sum(act.tensions) + jnp.linalg.norm(load.force) + jnp.linalg.norm(load.moment) / robot.length + weight
     return jnp.maximum(F, 1e-3)
 
@@ -132,11 +131,10 @@ def _straight_guess(robot, act, load, gravity, F_c):
     return jnp.concatenate([N0 / F_c, M0 / (F_c * L)])
 
 
-def _integrate(robot, act, load, gravity, opts, x, path=False):
-    """Shoots from base unknowns x (scaled N(0), M(0)) to the tip; returns (residual, states)."""
+def _integrate(robot, act, load, gravity, opts, x, F_c, path=False):
+    """Shoots from base unknowns x (N(0), M(0) scaled by F_c) to the tip; returns (residual, states)."""
     back, sil = segments(robot, act, opts)
     L, d = robot.length, act.insertion
-    F_c = _scale(robot, act, load, gravity)
     y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:] * F_c * L)
 
     def project(y):
@@ -195,24 +193,56 @@ def _newton(F, x0, tol, max_iter):
     return x, (r, (it - 1).astype(x.dtype))  # float: custom_root's aux must take float tangents
 
 
+STAGES = (1, 4, 16)
+"""Load continuation: numbers of equal load stages tried in turn when Newton fails."""
+
+
+def _continuation(F_at, x0, tol, max_iter):
+    """Solves F_at(1)(x) = 0 from x0, ramping all loads in stages when plain Newton fails.
+
+    F_at(lam) is the residual with tensions, tip load and gravity scaled by lam; x0 is linear in
+    the loads, so lam * x0 starts each ramp. Returns (root, (residual, total Newton steps)).
+    """
+
+    def not_done(c):
+        return ~c[-1]
+
+    def body(c):
+        x, r, it, K, stage, _ = c
+        lam = stage / K
+        guess = jnp.where(stage == 1, lam * x0, x)
+        x_new, (r_new, it_new) = _newton(F_at(lam), guess, tol, max_iter)
+        ok = jnp.max(jnp.abs(r_new)) <= tol
+        K_next = jnp.where(ok, K, K * (STAGES[1] // STAGES[0]))
+        stage_next = jnp.where(ok, stage + 1, 1)
+        done = (ok & (stage == K)) | (K_next > STAGES[-1])
+        return x_new, r_new, it + it_new, K_next, stage_next, done
+
+    init = (x0, jnp.full(x0.size, jnp.inf), jnp.zeros((), x0.dtype), STAGES[0], 1, False)
+    x, r, it, *_ = lax.while_loop(not_done, body, init)
+    return x, (r, it)
+
+
 def _tangent_solve(g, y):
     return jnp.linalg.solve(jax.jacfwd(g)(y), y)
 
 
 @jax.jit(static_argnames=("opts",))
-def _solve(robot, act, load, gravity, opts: SolverOptions) -> Solution:
+def _solve(robot, act, load, gravity, tol, max_iter, opts: SolverOptions) -> Solution:
     F_c = _scale(robot, act, load, gravity)
     x0 = _straight_guess(robot, act, load, gravity, F_c)
 
-    def F(x):
-        return _integrate(robot, act, load, gravity, opts, x)[0]
+    def F_at(lam):
+        act_lam = dataclasses.replace(act, tensions=lam * act.tensions)
+        load_lam = TipLoad(lam * load.force, lam * load.moment)
+        return lambda x: _integrate(robot, act_lam, load_lam, lam * gravity, opts, x, F_c)[0]
 
-    def newton(F, x0):
-        return _newton(F, x0, opts.tol, opts.max_iter)
+    def solve_root(F, x0):
+        return _continuation(F_at, x0, tol, max_iter)
 
-    x, (_, iterations) = lax.custom_root(F, x0, newton, _tangent_solve, has_aux=True)
-    res, ys = _integrate(robot, act, load, gravity, opts, x, path=True)
-    return _assemble(robot, act, opts, ys, res, iterations.astype(jnp.int32))
+    x, (_, iterations) = lax.custom_root(F_at(1.0), x0, solve_root, _tangent_solve, has_aux=True)
+    res, ys = _integrate(robot, act, load, gravity, opts, x, F_c, path=True)
+    return _assemble(robot, act, opts, ys, res, tol, iterations.astype(jnp.int32))
 
 
 def _node_quantities(back: Segment, sil: Segment, y: State, in_backbone):
@@ -225,7 +255,7 @@ def _node_quantities(back: Segment, sil: Segment, y: State, in_backbone):
     return jax.tree.map(lambda a, b: jnp.where(in_backbone, a, b), with_segment(back), with_segment(sil))
 
 
-def _assemble(robot, act, opts, ys: State, res, iterations) -> Solution:
+def _assemble(robot, act, opts, ys: State, res, tol, iterations) -> Solution:
     """Solution from the node states: strains and rod forces by each node's own segment."""
     back, sil = segments(robot, act, opts)
     n_b = opts.steps + 1
@@ -247,7 +277,7 @@ def _assemble(robot, act, opts, ys: State, res, iterations) -> Solution:
         curvature=u,
         residual=res,
         residual_norm=r_norm,
-        converged=r_norm <= opts.tol,
+        converged=r_norm <= tol,
         iterations=iterations,
     )
 
@@ -261,8 +291,8 @@ def solve(
     gravity=STANDARD_GRAVITY,
     transition: str = "balanced",
     tendon_model: str = "exact",
-    tol: float = 1e-10,
-    max_iter: int = 50,
+    tol: float = TOL,
+    max_iter: int = MAX_ITER,
     throw: bool = False,
 ) -> Solution:
     """Static shape of the TDCT robot (paper Sec. II; model-notes) by Newton shooting.
@@ -291,13 +321,16 @@ def solve(
         ValueError: bad input (names field, value and allowed range).
         ConvergenceError: with ``throw=True``, when the residual stays above ``tol``.
     """
-    opts = SolverOptions(steps=steps, transition=transition, tendon_model=tendon_model, tol=tol, max_iter=max_iter)
+    opts = SolverOptions(steps=steps, transition=transition, tendon_model=tendon_model)
+    check_range("tol", tol, 0.0, lo_open=True)
+    if not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+        raise ValueError(f"max_iter = {max_iter!r} must be an integer >= 1")
     load = TipLoad() if load is None else load
     gravity = jnp.zeros(3) if gravity is None else as_array("gravity", gravity, (3,))
     check_inputs(robot, act, load)
-    sol = _solve(robot, act, load, gravity, opts)
+    sol = _solve(robot, act, load, gravity, tol, max_iter, opts)
     if throw:
-        raise_if_failed(sol, opts)
+        raise_if_failed(sol, tol, max_iter)
     return sol
 
 
@@ -307,12 +340,16 @@ def check_inputs(robot: Robot, act: Actuation, load: TipLoad) -> None:
         if not isinstance(obj, cls):
             raise TypeError(f"{name} must be a tdct.{cls.__name__}, got {type(obj).__name__}")
     if np.shape(act.tensions)[-1:] != (robot.n_tendons,):
-        raise ValueError(f"tensions has shape {np.shape(act.tensions)}: the robot has {robot.n_tendons} tendons, one tension each")
+        raise ValueError(
+            f"tensions has shape {np.shape(act.tensions)}: the robot has {robot.n_tendons} tendons, one tension each"
+        )
     if is_concrete(act.insertion) and is_concrete(robot.length):
-        check_range("insertion", act.insertion, 0.0, float(robot.length), unit=f" m (0 to the robot length {float(robot.length):g} m)")
+        check_range(
+            "insertion", act.insertion, 0.0, float(robot.length), unit=f" m (0 to the robot length {float(robot.length):g} m)"
+        )
 
 
-def raise_if_failed(sol: Solution, opts: SolverOptions) -> None:
+def raise_if_failed(sol: Solution, tol: float, max_iter: int) -> None:
     """Raises ConvergenceError naming the residual that did not converge."""
     if isinstance(sol.converged, jax.core.Tracer):
         raise ValueError("throw=True needs concrete values; under jit or vmap use throw=False and check sol.converged")
@@ -322,7 +359,7 @@ def raise_if_failed(sol: Solution, opts: SolverOptions) -> None:
     worst = int(np.argmax(res))
     which = ("tip force", "tip moment")[worst // 3] + " " + "xyz"[worst % 3]
     raise ConvergenceError(
-        f"shooting did not converge: scaled {which} residual {res[worst]:.3g} > tol {opts.tol:g} after "
-        f"{int(np.max(sol.iterations))} iterations; raise max_iter (now {opts.max_iter}), check the inputs, "
+        f"shooting did not converge: scaled {which} residual {res[worst]:.3g} > tol {tol:g} after "
+        f"{int(np.max(sol.iterations))} iterations; raise max_iter (now {max_iter}), check the inputs, "
         "or solve a nearby configuration first"
     )

@@ -7,9 +7,7 @@ def hat(x):
     """Skew matrix x^ with x^ y = x cross y; x has shape (..., 3)."""
     x0, x1, x2 = x[..., 0], x[..., 1], x[..., 2]
     z = jnp.zeros_like(x0)
-    return jnp.stack(
-        [jnp.stack([z, -x2, x1], -1), jnp.stack([x2, z, -x0], -1), jnp.stack([-x1, x0, z], -1)], -2
-    )
+    return jnp.stack([jnp.stack([z, -x2, x1], -1), jnp.stack([x2, z, -x0], -1), jnp.stack([-x1, x0, z], -1)], -2)
 
 
 def orthonormalize(R):

@@ -1,0 +1,184 @@
+"""The solver against truths it did not produce: closed-form beams, equilibrium, RK4 order, limits."""
+
+import jax
+import numpy as np
+import pytest
+from conftest import NO_GRAVITY, rel_err
+from scipy.integrate import simpson
+from scipy.optimize import brentq
+from scipy.special import ellipe, ellipeinc, ellipk, ellipkinc
+
+import tdct_jax as tdct
+
+G = np.array([0.0, -9.81, 0.0])
+
+
+def test_small_deflection_matches_timoshenko_without_tube(robot):
+    P = 1e-4
+    sol = tdct.solve(robot, tdct.Actuation(), tdct.TipLoad(force=(0.0, -P, 0.0)), gravity=NO_GRAVITY, throw=True)
+    L, (I, _) = robot.length, robot.second_moments_silicone
+    exact = P * L**3 / (3 * robot.E_silicone * I) + P * L / (robot.G_silicone * robot.area_silicone)
+    assert rel_err(-sol.tip_position[1], exact) < 1e-3
+
+
+def test_small_deflection_with_tube_to_tip_has_no_shear_term(robot):
+    P = 1e-3
+    act = tdct.Actuation(insertion=robot.length)
+    sol = tdct.solve(robot, act, tdct.TipLoad(force=(P, 0.0, 0.0)), gravity=NO_GRAVITY, throw=True)
+    _, I = robot.second_moments_silicone
+    EI = robot.E_silicone * I + robot.E_tube * robot.second_moment_tube
+    assert rel_err(sol.tip_position[0], P * robot.length**3 / (3 * EI)) < 1e-3
+
+
+def bisshopp_drucker(alpha):
+    """Exact tip drop and horizontal reach / L of an inextensible cantilever under a dead tip load."""
+
+    def excess(theta0):
+        m = (1 + np.sin(theta0)) / 2
+        phi1 = np.arcsin(1 / np.sqrt(2 * m))
+        return ellipk(m) - ellipkinc(phi1, m) - np.sqrt(alpha)
+
+    theta0 = brentq(excess, 1e-9, np.pi / 2 - 1e-12)
+    m = (1 + np.sin(theta0)) / 2
+    phi1 = np.arcsin(1 / np.sqrt(2 * m))
+    drop = 1 - 2 / np.sqrt(alpha) * (ellipe(m) - ellipeinc(phi1, m))
+    return drop, np.sqrt(2 * np.sin(theta0) / alpha), theta0
+
+
+@pytest.mark.parametrize("alpha", [1.0, 5.0])
+def test_large_deflection_matches_elliptic_integral_solution(alpha):
+    # A slender rod (d/L = 0.002) with nu near -1 makes extension and shear negligible.
+    rod = tdct.Robot(
+        length=1.0,
+        outer_diameter=2e-3,
+        channel_diameter=1e-5,
+        tube_outer_diameter=1e-5,
+        tube_inner_diameter=0.0,
+        tendon_channel_diameter=0.0,
+        tendon_offset=0.0,
+        nu_silicone=-0.999,
+    )
+    EI = float(rod.bending_stiffness(False)[0])
+    sol = tdct.solve(rod, tdct.Actuation(), tdct.TipLoad(force=(0.0, -alpha * EI, 0.0)), gravity=NO_GRAVITY, throw=True)
+    drop, reach, theta0 = bisshopp_drucker(alpha)
+    assert rel_err(-sol.tip_position[1], drop) < 1e-3
+    assert rel_err(sol.tip_position[2], reach) < 1e-3
+    assert rel_err(-sol.tip_angle, theta0) < 1e-3
+
+
+@pytest.mark.parametrize("tendon", [0, 1])
+def test_single_tendon_bends_into_a_circular_arc(robot, tendon):
+    tau = np.zeros(4)
+    tau[tendon] = 3.0
+    sol = tdct.solve(robot, tdct.Actuation(tensions=tau), gravity=NO_GRAVITY, throw=True)
+    kappa = np.linalg.norm(np.asarray(sol.curvature), axis=1)
+    assert np.ptp(kappa) / kappa.mean() < 1e-8
+    I_x, I_y = robot.second_moments_silicone
+    I = I_x if tendon == 0 else I_y
+    assert rel_err(kappa.mean(), 3.0 * robot.tendon_offset / (robot.E_silicone * I)) < 1e-2
+    # The points lie on a circle through the base, tangent to +z there, of radius |v| / |u|
+    # (u is per undeformed length; the tendon also shortens the robot).
+    p = np.asarray(sol.position)
+    normal = np.cross(np.asarray(sol.rotation)[0] @ np.asarray(sol.curvature)[0], [0.0, 0.0, 1.0])
+    centre = normal / np.linalg.norm(normal) * np.linalg.norm(sol.strain[0]) / kappa.mean()
+    assert np.ptp(np.linalg.norm(p - centre, axis=1)) < 1e-9
+    # Tendon 1 (body +y) lifts the tip toward +y; tendon 2 (body -x) pulls it toward -x.
+    assert p[-1, 1] > 0.01 if tendon == 0 else p[-1, 0] < -0.01
+
+
+CASES = {
+    "planar": (tdct.Actuation(tensions=(8.0, 0, 0, 0), insertion=0.05), tdct.TipLoad.from_mass(0.03)),
+    "3d": (
+        tdct.Actuation(tensions=(6.0, 0, 3.0, 2.0), insertion=0.07),
+        tdct.TipLoad(force=(0.1, -0.2, 0.05), moment=(1e-3, 0.0, 2e-3)),
+    ),
+}
+
+
+def _equilibrium_defect(robot, act, load, sol):
+    """Base load minus the tip load and the weight (force), and minus their moments about the base."""
+    s, p = np.asarray(sol.s), np.asarray(sol.position)
+    d = float(act.insertion)
+    nb = (len(s) + 1) // 2
+    rho_b, rho_s = float(robot.linear_density(True)), float(robot.linear_density(False))
+    weight = G * (rho_s * robot.length + (rho_b - rho_s) * d)
+    lever = simpson(np.cross(p[:nb], rho_b * G), x=s[:nb], axis=0) + simpson(np.cross(p[nb - 1 :], rho_s * G), x=s[nb - 1 :], axis=0)
+    force = np.asarray(sol.total_force[0]) - (load.force + weight)
+    moment = np.asarray(sol.total_moment[0]) - (np.cross(p[-1], load.force) + load.moment + lever)
+    scale_f = np.linalg.norm(load.force) + np.linalg.norm(weight) + float(np.sum(act.tensions))
+    return np.abs(force).max() / scale_f, np.abs(moment).max() / (scale_f * robot.length)
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_global_equilibrium_and_continuity_at_transition(robot, case):
+    act, load = CASES[case]
+    sol = tdct.solve(robot, act, load, throw=True)
+    f_err, m_err = _equilibrium_defect(robot, act, load, sol)
+    assert f_err < 1e-9 and m_err < 1e-9
+    # Both sides of s = d: total (rod + tendon) force and moment continuous; the rod's own jump.
+    k = (len(sol.s) - 1) // 2
+    assert float(sol.s[k]) == pytest.approx(float(act.insertion))
+    ds = float(sol.s[k + 1] - sol.s[k])
+    for field in ("position", "total_force", "total_moment"):
+        a = np.asarray(getattr(sol, field))
+        jump = np.abs(a[k + 1] - a[k]) - np.abs(a[k] - a[k - 1])
+        assert np.max(jump) < 10 * ds * np.abs(a).max() + 1e-12
+
+
+def test_paper_options_show_the_known_equilibrium_defect(robot):
+    act, load = CASES["planar"]
+    sol = tdct.solve(robot, act, load, transition="paper", tendon_model="paper", throw=True)
+    f_err, m_err = _equilibrium_defect(robot, act, load, sol)
+    print(f"paper transition: relative force defect {f_err:.3g}, moment defect {m_err:.3g}")
+    assert f_err > 1e-4
+
+
+def test_rk4_is_fourth_order(robot):
+    act, load = tdct.Actuation(tensions=(10.0, 0, 0, 0), insertion=0.04), tdct.TipLoad.from_mass(0.05)
+    tips = {n: np.asarray(tdct.solve(robot, act, load, steps=n, throw=True).tip_position) for n in (5, 10, 20, 40)}
+    e_coarse = np.linalg.norm(tips[5] - tips[20])
+    e_fine = np.linalg.norm(tips[10] - tips[40])
+    print(f"tip error {e_coarse:.3g} m at 5 steps, {e_fine:.3g} m at 10: ratio {e_coarse / e_fine:.1f}")
+    assert 10 < e_coarse / e_fine < 20
+
+
+def test_rotations_stay_on_so3(paper_case):
+    R = np.asarray(paper_case[3].rotation)
+    assert np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max() < 1e-12
+
+
+@pytest.fixture(scope="session")
+def tip_vs_insertion(robot):
+    load = tdct.TipLoad.from_mass(0.05)
+
+    def tip(d):
+        return tdct.solve(robot, tdct.Actuation(tensions=(10.0, 0, 0, 0), insertion=d), load).tip_position
+
+    return tip, jax.jit(jax.jacfwd(tip))
+
+
+@pytest.mark.parametrize("d", [0.0, 0.16])
+def test_tip_and_its_insertion_derivative_are_continuous_at_the_limits(robot, tip_vs_insertion, d):
+    tip, dtip = tip_vs_insertion
+    sign = 1.0 if d == 0 else -1.0
+    # No jump and no kink: the Taylor remainder of a step toward the interior falls as its square.
+    def remainder(eps):
+        return np.linalg.norm(np.asarray(tip(d + eps) - tip(d)) - eps * np.asarray(dtip(d)))
+
+    assert remainder(sign * 1e-6) < remainder(sign * 1e-5) / 30
+    assert rel_err(dtip(d + sign * 1e-7), dtip(d)) < 1e-3
+    # The implicit derivative agrees with central differences of the solve.
+    h = 1e-5
+    fd = (tip(0.08 + h) - tip(0.08 - h)) / (2 * h)
+    assert rel_err(dtip(0.08), fd) < 1e-6
+
+
+def test_soft_tube_reproduces_the_silicone_only_robot():
+    # With a tube of negligible stiffness and mass, d = L differs from d = 0 only by shear,
+    # which nu near -1 makes negligible.
+    soft = tdct.Robot(E_tube=1e-3, density_tube=0.0, nu_silicone=-0.999)
+    act, load = tdct.Actuation(tensions=(5.0, 2.0, 0, 0)), tdct.TipLoad.from_mass(0.02)
+    free = tdct.solve(soft, act, load, throw=True)
+    full = tdct.solve(soft, tdct.Actuation(tensions=act.tensions, insertion=soft.length), load, throw=True)
+    n = (len(free.s) + 1) // 2  # both grids: the same steps over [0, L], one on each side
+    assert rel_err(full.position[:n], free.position[-n:]) < 1e-4
