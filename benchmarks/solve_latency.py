@@ -1,0 +1,83 @@
+"""Compile time, warm single-solve latency and Newton iterations for paper configurations.
+
+Run: python benchmarks/solve_latency.py [--repeats 200] [--steps 50]
+Writes benchmarks/results/latency.json. For steady numbers pin to one core: taskset -c 0 python ...
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+import tdct_jax as tdct
+from tdct_jax.shooting import _solve
+
+CONFIGS = {
+    "6 N, 80 mm, 20 g (Fig. 6)": ((6.0, 0, 0, 0), 0.080, 0.020),
+    "10 N, no tube, 50 g": ((10.0, 0, 0, 0), 0.0, 0.050),
+    "10 N, 70 mm, 50 g (Fig. 13A optimum)": ((10.0, 0, 0, 0), 0.070, 0.050),
+    "3 + 5 N on tendons 1, 4, 120 mm, 0 g": ((3.0, 0, 0, 5.0), 0.120, 0.0),
+    "0 N, tube to tip, 0 g": ((0.0, 0, 0, 0), 0.160, 0.0),
+}
+PAPER_SECONDS = 0.82
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=200)
+    parser.add_argument("--steps", type=int, default=50)
+    parser.add_argument("--out", default=str(Path(__file__).parent / "results" / "latency.json"))
+    args = parser.parse_args()
+
+    robot = tdct.Robot()
+    t0 = time.perf_counter()
+    first = tdct.solve(robot, tdct.Actuation(), steps=args.steps)
+    jax.block_until_ready(first.position)
+    compile_s = time.perf_counter() - t0
+    print(f"compile + first solve: {compile_s:.2f} s (steps = {args.steps} per segment)")
+
+    rows = []
+    for name, (tensions, insertion, mass) in CONFIGS.items():
+        act, load = tdct.Actuation(tensions, insertion), tdct.TipLoad.from_mass(mass)
+        sol = tdct.solve(robot, act, load, steps=args.steps, throw=True)
+        times = []
+        for _ in range(args.repeats):
+            t = time.perf_counter()
+            jax.block_until_ready(tdct.solve(robot, act, load, steps=args.steps).position)
+            times.append(time.perf_counter() - t)
+        times_ms = np.array(times) * 1e3
+        row = dict(
+            config=name,
+            median_ms=float(np.median(times_ms)),
+            p90_ms=float(np.percentile(times_ms, 90)),
+            iterations=int(sol.iterations),
+            residual_norm=float(sol.residual_norm),
+            tip_position_mm=(np.asarray(sol.tip_position) * 1e3).round(4).tolist(),
+            speedup_vs_paper=PAPER_SECONDS / float(np.median(times)),
+        )
+        rows.append(row)
+        print(f"{name:40s} median {row['median_ms']:7.2f} ms  p90 {row['p90_ms']:7.2f} ms  {row['iterations']} iterations  {row['speedup_vs_paper']:.0f}x the paper's 0.82 s")
+
+    result = dict(
+        date=time.strftime("%Y-%m-%d"),
+        machine=f"{platform.processor() or platform.machine()}, {jax.device_count()} x {jax.devices()[0].platform}",
+        jax=jax.__version__,
+        steps_per_segment=args.steps,
+        repeats=args.repeats,
+        compile_and_first_solve_s=compile_s,
+        cache_entries=_solve._cache_size(),
+        configs=rows,
+    )
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

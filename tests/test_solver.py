@@ -1,0 +1,65 @@
+"""Solver behaviour: convergence over the operating envelope, vmap, gradients, no retracing."""
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from conftest import rel_err
+
+import tdct_jax as tdct
+from tdct_jax.shooting import _solve
+
+
+def envelope(n, seed=0):
+    """Random configurations: 0-10 N on a random subset of tendons, 0-160 mm, 0-0.5 N any direction."""
+    rng = np.random.default_rng(seed)
+    tensions = rng.uniform(0, 10, (n, 4)) * (rng.random((n, 4)) < 0.5)
+    insertion = rng.uniform(0, 0.16, n)
+    direction = rng.normal(size=(n, 3))
+    force = direction / np.linalg.norm(direction, axis=1, keepdims=True) * rng.uniform(0, 0.5, (n, 1))
+    return tensions, insertion, force
+
+
+def batched_solve(robot):
+    def one(tau, d, f):
+        return tdct.solve(robot, tdct.Actuation(tau, d), tdct.TipLoad(f))
+
+    return jax.jit(jax.vmap(one))
+
+
+def test_converges_over_the_operating_envelope(robot):
+    tensions, insertion, force = envelope(500)
+    sol = batched_solve(robot)(tensions, insertion, force)
+    failed = int(np.sum(~np.asarray(sol.converged)))
+    iters = np.asarray(sol.iterations)
+    print(f"500 random configurations: {failed} failed; Newton iterations min {iters.min()}, mean {iters.mean():.2f}, max {iters.max()}")
+    assert failed == 0
+    assert np.asarray(sol.residual_norm).max() <= 1e-10
+    # vmap equals one-by-one solves.
+    for i in (0, 7, 123):
+        single = tdct.solve(robot, tdct.Actuation(tensions[i], insertion[i]), tdct.TipLoad(force[i]))
+        np.testing.assert_allclose(sol.position[i], single.position, rtol=0, atol=1e-12)
+
+
+def test_no_retracing_when_only_values_change(paper_case):
+    robot, act, load, _ = paper_case
+    before = _solve._cache_size()
+    for tau in (1.0, 2.0, 3.0):
+        tdct.solve(dataclasses.replace(robot, E_silicone=tau * 1e6), tdct.Actuation((tau, 0, 0, 0), 0.01 * tau), load)
+    assert _solve._cache_size() == before
+
+
+def test_reverse_and_forward_gradients_agree_with_central_differences(paper_case):
+    robot, act, load, _ = paper_case
+
+    def tip_y(E, tau1):
+        r = dataclasses.replace(robot, E_silicone=E)
+        return tdct.solve(r, tdct.Actuation(jnp.stack([tau1, 0.0, 0.0, 0.0]), act.insertion), load).tip_position[1]
+
+    g = jax.grad(tip_y, argnums=(0, 1))(0.85e6, 6.0)
+    hE, ht = 1e2, 1e-4
+    fd_E = (tip_y(0.85e6 + hE, 6.0) - tip_y(0.85e6 - hE, 6.0)) / (2 * hE)
+    fd_t = (tip_y(0.85e6, 6.0 + ht) - tip_y(0.85e6, 6.0 - ht)) / (2 * ht)
+    assert rel_err(g[0], fd_E) < 1e-6
+    assert rel_err(g[1], fd_t) < 1e-6
