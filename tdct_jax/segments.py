@@ -1,7 +1,7 @@
 """The two Cosserat segments as pure vector fields (paper eqs. 1 and 23-30, model-notes).
 
 Both segments carry the same state: position p, rotation R (body to world), and the *total*
-internal force N = n + sum_t tau_t t_t and moment N = m + sum_t (R r_t) x tau_t t_t of rod plus
+internal force N = n + sum_t tau_t t_t and moment M = m + sum_t (R r_t) x tau_t t_t of rod plus
 tendons, in the world frame (n, m: the rod's own; t_t: tendon t's unit tangent). Tendon forces
 are internal to rod plus tendons, so
 

@@ -311,7 +311,7 @@ def solve(
         transition: "balanced" (default) or "paper", see SolverOptions.
         tendon_model: "exact" (default) or "paper", see SolverOptions.
         tol: tolerance on the scaled tip residual.
-        max_iter: most Newton iterations.
+        max_iter: most Newton iterations per load stage (see STAGES; ``sol.iterations`` counts all).
         throw: raise ConvergenceError if the solve did not converge (needs concrete values).
 
     Returns:
