@@ -62,7 +62,9 @@ def main() -> None:
             speedup_vs_paper=PAPER_SECONDS / float(np.median(times)),
         )
         rows.append(row)
-        print(f"{name:40s} median {row['median_ms']:7.2f} ms  p90 {row['p90_ms']:7.2f} ms  {row['iterations']} iterations  {row['speedup_vs_paper']:.0f}x the paper's 0.82 s")
+        print(
+            f"{name:40s} median {row['median_ms']:7.2f} ms  p90 {row['p90_ms']:7.2f} ms  {row['iterations']} iterations  {row['speedup_vs_paper']:.0f}x the paper's 0.82 s"
+        )
 
     result = dict(
         date=time.strftime("%Y-%m-%d"),

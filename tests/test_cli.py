@@ -21,7 +21,9 @@ def test_json_output_matches_the_api(capsys, paper_case):
 
 def test_human_output_csv_and_plot(tmp_path, capsys):
     csv, png = tmp_path / "shape.csv", tmp_path / "shape.png"
-    code = main(["solve", "--tensions", "6,0,0,0", "--insertion-mm", "80", "--tip-mass-g", "20", "--csv", str(csv), "--plot", str(png)])
+    code = main(
+        ["solve", "--tensions", "6,0,0,0", "--insertion-mm", "80", "--tip-mass-g", "20", "--csv", str(csv), "--plot", str(png)]
+    )
     assert code == 0
     text = capsys.readouterr().out
     assert "tip position [mm]" in text and "tip angle [deg]" in text and "converged:         yes" in text
@@ -44,7 +46,10 @@ def test_bad_input_exits_2_with_the_reason(capsys, tmp_path):
 def test_robot_file_changes_the_answer(tmp_path, capsys, paper_case):
     stiff = tmp_path / "stiff.toml"
     stiff.write_text("[robot]\nE_silicone = 1.7e6\n")
-    assert main(["solve", "--tensions", "6,0,0,0", "--insertion-mm", "80", "--tip-mass-g", "20", "--json", "--robot", str(stiff)]) == 0
+    assert (
+        main(["solve", "--tensions", "6,0,0,0", "--insertion-mm", "80", "--tip-mass-g", "20", "--json", "--robot", str(stiff)])
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     ref = tdct.solve(tdct.Robot(E_silicone=1.7e6), paper_case[1], paper_case[2])
     np.testing.assert_allclose(out["tip_position_mm"], np.asarray(ref.tip_position) * 1e3, rtol=1e-12)

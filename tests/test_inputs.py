@@ -92,5 +92,8 @@ def test_non_convergence_is_loud(paper_case):
     sol = tdct.solve(robot, act, load, max_iter=1)
     # One Newton step per load stage: the plain attempt, then ramps of 4 and 16 stages.
     assert not bool(sol.converged) and 1 <= int(sol.iterations) <= 1 + 4 + 16
-    with pytest.raises(tdct.ConvergenceError, match=r"tip (force|moment) . residual .* > tol 1e-10 after \d+ iterations; raise max_iter \(now 1\)"):
+    with pytest.raises(
+        tdct.ConvergenceError,
+        match=r"tip (force|moment) . residual .* > tol 1e-10 after \d+ iterations; raise max_iter \(now 1\)",
+    ):
         tdct.solve(robot, act, load, max_iter=1, throw=True)

@@ -102,7 +102,9 @@ def _equilibrium_defect(robot, act, load, sol):
     nb = (len(s) + 1) // 2
     rho_b, rho_s = float(robot.linear_density(True)), float(robot.linear_density(False))
     weight = G * (rho_s * robot.length + (rho_b - rho_s) * d)
-    lever = simpson(np.cross(p[:nb], rho_b * G), x=s[:nb], axis=0) + simpson(np.cross(p[nb - 1 :], rho_s * G), x=s[nb - 1 :], axis=0)
+    lever = simpson(np.cross(p[:nb], rho_b * G), x=s[:nb], axis=0) + simpson(
+        np.cross(p[nb - 1 :], rho_s * G), x=s[nb - 1 :], axis=0
+    )
     force = np.asarray(sol.total_force[0]) - (load.force + weight)
     moment = np.asarray(sol.total_moment[0]) - (np.cross(p[-1], load.force) + load.moment + lever)
     scale_f = np.linalg.norm(load.force) + np.linalg.norm(weight) + float(np.sum(act.tensions))
@@ -161,6 +163,7 @@ def tip_vs_insertion(robot):
 def test_tip_and_its_insertion_derivative_are_continuous_at_the_limits(robot, tip_vs_insertion, d):
     tip, dtip = tip_vs_insertion
     sign = 1.0 if d == 0 else -1.0
+
     # No jump and no kink: the Taylor remainder of a step toward the interior falls as its square.
     def remainder(eps):
         return np.linalg.norm(np.asarray(tip(d + eps) - tip(d)) - eps * np.asarray(dtip(d)))
