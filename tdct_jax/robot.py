@@ -180,7 +180,12 @@ class Robot:
         extra = self.E_tube * self.second_moment_tube if with_tube else 0.0
         return jnp.stack([self.E_silicone * I_x + extra, self.E_silicone * I_y + extra, self.G_silicone * (I_x + I_y)])
 
+    @property
+    def tube_linear_density(self):
+        """Mass per unit length of the Nitinol tube [kg/m]."""
+        return self.density_tube * self.area_tube
+
     def linear_density(self, with_tube: bool):
         """Mass per unit length [kg/m] of the silicone, plus the tube where it is inserted."""
         rho = self.density_silicone * self.area_silicone
-        return rho + self.density_tube * self.area_tube if with_tube else rho
+        return rho + self.tube_linear_density if with_tube else rho

@@ -115,9 +115,7 @@ def _scale(robot, act, load, gravity):
     A constant for differentiation: it only reparametrises the unknowns.
     """
     robot, act, load, gravity = lax.stop_gradient((robot, act, load, gravity))
-    weight = jnp.linalg.norm(gravity) * (
-        robot.linear_density(False) * robot.length + robot.density_tube * robot.area_tube * act.insertion
-    )
+    weight = jnp.linalg.norm(gravity) * (robot.linear_density(False) * robot.length + robot.tube_linear_density * act.insertion)
     F = jnp.sum(act.tensions) + jnp.linalg.norm(load.force) + jnp.linalg.norm(load.moment) / robot.length + weight
     return jnp.maximum(F, 1e-3)
 
@@ -125,7 +123,7 @@ def _scale(robot, act, load, gravity):
 def _straight_guess(robot, act, load, gravity, F_c):
     """Base unknowns of the straight rod: exact in force, first-order in moment."""
     L, d = robot.length, act.insertion
-    rho1, rho2 = robot.linear_density(False), robot.density_tube * robot.area_tube
+    rho1, rho2 = robot.linear_density(False), robot.tube_linear_density
     N0 = load.force + gravity * (rho1 * L + rho2 * d)
     M0 = load.moment + jnp.cross(L * E3, load.force) + jnp.cross(E3, gravity) * (rho1 * L**2 + rho2 * d**2) / 2
     return jnp.concatenate([N0 / F_c, M0 / (F_c * L)])
