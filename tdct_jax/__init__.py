@@ -7,6 +7,12 @@ jax.config.update("jax_enable_x64", True)
 from .loads import STANDARD_GRAVITY as STANDARD_GRAVITY  # noqa: E402
 from .loads import Actuation as Actuation  # noqa: E402
 from .loads import TipLoad as TipLoad  # noqa: E402
+from .mechanics import Ellipsoid as Ellipsoid  # noqa: E402
+from .mechanics import compliance as compliance  # noqa: E402
+from .mechanics import compliance_ellipsoid as compliance_ellipsoid  # noqa: E402
+from .mechanics import finite_difference_compliance as finite_difference_compliance  # noqa: E402
+from .mechanics import kinematic_jacobian as kinematic_jacobian  # noqa: E402
+from .mechanics import parameter_jacobian as parameter_jacobian  # noqa: E402
 from .robot import Robot as Robot  # noqa: E402
 from .shooting import ConvergenceError as ConvergenceError  # noqa: E402
 from .shooting import Solution as Solution  # noqa: E402

@@ -1,0 +1,142 @@
+"""Derived mechanics: exact tip compliance (eq. 41), compliance ellipsoid (eq. 43), Jacobians.
+
+Every derivative here is forward-mode autodiff through the converged shooting solution: JAX
+differentiates the root implicitly (one 6x6 shooting Jacobian, no extra Newton solves, no
+finite differences). ``finite_difference_compliance`` keeps the paper's method for comparison.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .loads import Actuation, TipLoad
+from .robot import Robot
+from .shooting import MAX_ITER, TOL, raise_if_failed, solve
+
+
+def _tip_pose_jacobian(solve_at, w, throw, solve_options):
+    """d(tip position, tip rotation vector)/dw, (6, n); the rotation part is vee(dR R^T), world frame."""
+
+    def pose(w):
+        sol = solve_at(w)
+        return (sol.tip_position, sol.tip_rotation), sol
+
+    (Jp, JR), sol = jax.jacfwd(pose, has_aux=True)(w)
+    A = jnp.einsum("ijk,lj->ilk", JR, sol.tip_rotation)
+    J = jnp.concatenate([Jp, jnp.stack([A[2, 1], A[0, 2], A[1, 0]])], axis=0)
+    if throw:
+        raise_if_failed(sol, solve_options.get("tol", TOL), solve_options.get("max_iter", MAX_ITER))
+        return J
+    return jnp.where(sol.converged, J, jnp.nan)
+
+
+def compliance(
+    robot: Robot, act: Actuation, load: TipLoad | None = None, *, full: bool = False, throw: bool = True, **solve_options
+):
+    """Tip compliance CM = d p(L) / d F_e (eq. 41), exact, in m/N.
+
+    Args:
+        robot, act, load: as for ``tdct.solve``; the compliance is taken about this tip load.
+        full: return the 6x6 compliance d(tip position, tip rotation vector) / d(F_e, M_e) instead
+            (blocks in m/N, m/(N m), rad/N, rad/(N m); rotation vector in the world frame).
+        throw: raise ``ConvergenceError`` if the solution did not converge (needs concrete values);
+            with False (under jit or vmap) a non-converged solution gives a matrix of NaN.
+        **solve_options: steps, gravity, transition, tendon_model, tol, max_iter for ``tdct.solve``.
+
+    Returns:
+        CM, shape (3, 3) (or (6, 6) with ``full``).
+    """
+    load = TipLoad() if load is None else load
+
+    def solve_at(w):
+        return solve(robot, act, TipLoad(w[:3], w[3:]), **solve_options)
+
+    w = jnp.concatenate([jnp.asarray(load.force), jnp.asarray(load.moment)])
+    J = _tip_pose_jacobian(solve_at, w, throw, solve_options)
+    return J if full else J[:3, :3]
+
+
+def kinematic_jacobian(robot: Robot, act: Actuation, load: TipLoad | None = None, *, throw: bool = True, **solve_options):
+    """d(tip position [m], tip rotation vector [rad]) / d(tensions [N], insertion [m]), shape (6, n_t + 1).
+
+    The last column is the tube insertion depth, a real differentiable input (one-sided at d = 0
+    and d = L, where the solution extends smoothly). Arguments as for ``compliance``.
+    """
+    load = TipLoad() if load is None else load
+
+    def solve_at(w):
+        return solve(robot, Actuation(w[:-1], w[-1]), load, **solve_options)
+
+    w = jnp.concatenate([jnp.asarray(act.tensions), jnp.reshape(jnp.asarray(act.insertion), (1,))])
+    return _tip_pose_jacobian(solve_at, w, throw, solve_options)
+
+
+def parameter_jacobian(
+    robot: Robot, act: Actuation, load: TipLoad | None = None, *, params=("E_silicone",), throw: bool = True, **solve_options
+):
+    """d(tip position, tip rotation vector) / d(scalar Robot fields named in ``params``), (6, len(params)).
+
+    Units follow the fields (e.g. m/Pa for E_silicone). Arguments as for ``compliance``.
+    """
+    load = TipLoad() if load is None else load
+    scalars = [f.name for f in dataclasses.fields(Robot) if f.name != "tendon_angles"]
+    for p in params:
+        if p not in scalars:
+            raise ValueError(f"params: {p!r} is not a scalar Robot field; allowed: {scalars}")
+
+    def solve_at(w):
+        return solve(dataclasses.replace(robot, **{p: w[i] for i, p in enumerate(params)}), act, load, **solve_options)
+
+    w = jnp.stack([jnp.asarray(getattr(robot, p)) for p in params])
+    return _tip_pose_jacobian(solve_at, w, throw, solve_options)
+
+
+def finite_difference_compliance(
+    robot: Robot, act: Actuation, load: TipLoad | None = None, *, step: float = 1e-4, **solve_options
+):
+    """CM by central differences of the tip position over the three tip-force components (the
+    paper's method): 6 extra solves, each required to converge. ``step`` is in N."""
+    load = TipLoad() if load is None else load
+    columns = []
+    for k in range(3):
+        dF = np.zeros(3)
+        dF[k] = step
+        tips = [
+            solve(robot, act, TipLoad(np.asarray(load.force) + sign * dF, load.moment), throw=True, **solve_options).tip_position
+            for sign in (1.0, -1.0)
+        ]
+        columns.append((tips[0] - tips[1]) / (2 * step))
+    return jnp.stack(columns, axis=1)
+
+
+class Ellipsoid(NamedTuple):
+    """Compliance ellipsoid of CM (eqs. 40-43).
+
+    eigenvalues, eigenvectors: of the symmetric part (CM + CM^T)/2, ascending, eigenvectors as
+        columns: the paper's lambda_1..3 and mu_1..3 (Figs. 10-11).
+    semi_axes, axes: singular values of CM (descending) and the left singular vectors (columns):
+        the exact semi-axes and directions of {CM f : |f| = 1} (eq. 43).
+    The two agree when CM is symmetric positive definite, as for an unloaded robot without
+    tendon tension. Tendon tension and a tip load make CM slightly non-symmetric (the tendon load
+    follows the body), and then only the singular values describe the ellipsoid exactly.
+    """
+
+    eigenvalues: jax.Array
+    eigenvectors: jax.Array
+    semi_axes: jax.Array
+    axes: jax.Array
+
+
+def compliance_ellipsoid(CM) -> Ellipsoid:
+    """Eigen- and singular-value description of a 3x3 compliance matrix (see Ellipsoid)."""
+    CM = jnp.asarray(CM)
+    if CM.shape[-2:] != (3, 3):
+        raise ValueError(f"CM must have shape (..., 3, 3), got {CM.shape}")
+    lam, mu = jnp.linalg.eigh((CM + jnp.swapaxes(CM, -1, -2)) / 2)
+    U, S, _ = jnp.linalg.svd(CM)
+    return Ellipsoid(lam, mu, S, U)

@@ -1,0 +1,85 @@
+"""Exact compliance and Jacobians against closed forms and central differences of the solve."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from conftest import NO_GRAVITY, rel_err
+
+import tdct_jax as tdct
+
+BENT = (tdct.Actuation(tensions=(8.0, 0.0, 0.0, 3.0), insertion=0.05), tdct.TipLoad(force=(0.05, -0.3, 0.02)))
+
+
+@pytest.mark.parametrize("insertion", [0.0, 0.16])
+def test_straight_cantilever_compliance_is_timoshenkos(robot, insertion):
+    CM = np.asarray(tdct.compliance(robot, tdct.Actuation(insertion=insertion), gravity=NO_GRAVITY))
+    L, (I_x, I_y) = robot.length, robot.second_moments_silicone
+    E, EA = robot.E_silicone, robot.E_silicone * robot.area_silicone
+    if insertion == 0:
+        shear = L / (robot.G_silicone * robot.area_silicone)
+        bend = [L**3 / (3 * E * I_y) + shear, L**3 / (3 * E * I_x) + shear]
+    else:  # the tube forbids shear
+        EI_tube = robot.E_tube * robot.second_moment_tube
+        bend = [L**3 / (3 * (E * I_y + EI_tube)), L**3 / (3 * (E * I_x + EI_tube))]
+    assert rel_err(CM, np.diag([*bend, L / EA])) < 1e-6
+
+
+def test_autodiff_compliance_matches_central_differences_when_bent(robot):
+    act, load = BENT
+    CM = tdct.compliance(robot, act, load)
+    fd = tdct.finite_difference_compliance(robot, act, load, step=1e-5)
+    assert rel_err(CM, fd) < 1e-6
+    full = tdct.compliance(robot, act, load, full=True)
+    np.testing.assert_array_equal(full[:3, :3], CM)
+    # Rotation block: a small tip force rotates R(L) by the rotation vector full[3:, :3] @ dF.
+    dF = np.array([0.0, 1e-5, 0.0])
+    R0 = tdct.solve(robot, act, load).tip_rotation
+    R1 = tdct.solve(robot, act, tdct.TipLoad(load.force + dF)).tip_rotation
+    W = np.asarray(R1 @ R0.T)
+    assert rel_err((W - W.T)[[2, 0, 1], [1, 2, 0]] / 2, np.asarray(full[3:, :3]) @ dF) < 1e-4
+
+
+@pytest.mark.parametrize("d", [1e-4, 0.08, 0.16 - 1e-4])
+def test_insertion_column_of_kinematic_jacobian_matches_differences(robot, d):
+    act = tdct.Actuation(tensions=(10.0, 0.0, 0.0, 0.0), insertion=d)
+    load = tdct.TipLoad.from_mass(0.05)
+    J = np.asarray(tdct.kinematic_jacobian(robot, act, load))
+    assert J.shape == (6, 5)
+    # Fourth-order central differences: the tip curves sharply in d near d = L.
+    h = 2e-5
+    tip = {k: np.asarray(tdct.solve(robot, tdct.Actuation(act.tensions, d + k * h), load).tip_position) for k in (-2, -1, 1, 2)}
+    fd = (8 * (tip[1] - tip[-1]) - (tip[2] - tip[-2])) / (12 * h)
+    assert rel_err(J[:3, -1], fd) < 1e-6
+
+
+def test_parameter_jacobian_matches_differences(paper_case):
+    robot, act, load, _ = paper_case
+    J = np.asarray(tdct.parameter_jacobian(robot, act, load, params=("E_silicone", "tendon_offset")))
+    for k, (name, h) in enumerate([("E_silicone", 1e2), ("tendon_offset", 1e-7)]):
+        value = float(getattr(robot, name))
+        tips = [tdct.solve(dataclasses.replace(robot, **{name: value + s * h}), act, load).tip_position for s in (1, -1)]
+        assert rel_err(J[:3, k], (tips[0] - tips[1]) / (2 * h)) < 1e-6
+    with pytest.raises(ValueError, match="'stiffness' is not a scalar Robot field"):
+        tdct.parameter_jacobian(robot, act, load, params=("stiffness",))
+
+
+def test_ellipsoid_of_a_symmetric_matrix_has_eigenvalues_as_semi_axes():
+    rng = np.random.default_rng(1)
+    Q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    CM = Q @ np.diag([0.001, 0.08, 0.2]) @ Q.T
+    e = tdct.compliance_ellipsoid(CM)
+    np.testing.assert_allclose(e.eigenvalues, [0.001, 0.08, 0.2], rtol=1e-12)
+    np.testing.assert_allclose(e.semi_axes, [0.2, 0.08, 0.001], rtol=1e-12)
+    np.testing.assert_allclose(np.abs(e.axes[:, 0] @ e.eigenvectors[:, 2]), 1.0, rtol=1e-12)
+    with pytest.raises(ValueError, match="shape"):
+        tdct.compliance_ellipsoid(np.eye(2))
+
+
+def test_bad_input_and_non_convergence_fail_loudly(robot):
+    with pytest.raises(ValueError, match="insertion = 0.3 is outside"):
+        tdct.compliance(robot, tdct.Actuation(insertion=0.3))
+    act, load = BENT
+    with pytest.raises(tdct.ConvergenceError):
+        tdct.compliance(robot, act, load, max_iter=1)
+    assert np.all(np.isnan(tdct.compliance(robot, act, load, max_iter=1, throw=False)))
