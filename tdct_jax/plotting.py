@@ -64,3 +64,56 @@ def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, 
         fig.savefig(path, dpi=120)
         plt.close(fig)
     return fig
+
+
+def plot_fd_error(rows, path: str | Path):
+    """Relative error of finite-difference compliance against the exact one vs the FD step (V curve).
+
+    Args:
+        rows: dicts with keys config, fd_steps_N, fd_relative_error (benchmarks/compliance_autodiff_vs_fd.py).
+        path: PNG to write.
+    """
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    for row in rows:
+        ax.loglog(row["fd_steps_N"], row["fd_relative_error"], "o-", label=row["config"])
+    ax.set_xlabel("finite-difference step in tip force [N]")
+    ax.set_ylabel("relative error of FD compliance vs exact")
+    ax.set_title("Central differences against the exact (autodiff) CM")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_compliance_ellipses(CMs: dict, path: str | Path | None = None, title: str | None = None):
+    """Compliance ellipsoids {CM f : |f| = 1} projected on the plane of the first one's two largest
+    axes (paper Fig. 10), in mm/N.
+
+    Args:
+        CMs: label -> 3x3 compliance matrix [m/N]; the first sets the projection plane.
+        path: where to save a PNG; the figure is returned either way.
+        title: axes title.
+    """
+    plt = _pyplot()
+    mats = {k: np.asarray(v) * 1e3 for k, v in CMs.items()}
+    U, _, _ = np.linalg.svd(next(iter(mats.values())))
+    plane = U[:, :2]
+    t = np.linspace(0, 2 * np.pi, 200)
+    fig, ax = plt.subplots(figsize=(5.6, 5.2))
+    for label, CM in mats.items():
+        u, s, _ = np.linalg.svd(plane.T @ CM)
+        xy = u @ (s[:, None] * np.stack([np.cos(t), np.sin(t)]))
+        ax.plot(xy[0], xy[1], lw=2, label=label)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("along the major axis [mm/N]")
+    ax.set_ylabel("along the second axis [mm/N]")
+    ax.set_title(title or "compliance ellipse (tip displacement per N of tip force)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+    return fig

@@ -53,3 +53,27 @@ def test_robot_file_changes_the_answer(tmp_path, capsys, paper_case):
     out = json.loads(capsys.readouterr().out)
     ref = tdct.solve(tdct.Robot(E_silicone=1.7e6), paper_case[1], paper_case[2])
     np.testing.assert_allclose(out["tip_position_mm"], np.asarray(ref.tip_position) * 1e3, rtol=1e-12)
+
+
+def test_compliance_verb_matches_the_api(capsys, tmp_path, robot):
+    png = tmp_path / "ellipse.png"
+    args = [
+        "compliance",
+        "--tensions",
+        "8,0,0,0",
+        "--insertion-mm",
+        "50",
+        "--tip-force=0.05,-0.3,0.02",
+        "--json",
+        "--plot",
+        str(png),
+    ]
+    assert main(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    act, load = tdct.Actuation((8.0, 0, 0, 0), 0.05), tdct.TipLoad(force=(0.05, -0.3, 0.02))
+    CM = np.asarray(tdct.compliance(robot, act, load))
+    np.testing.assert_allclose(out["compliance_mm_per_N"], CM * 1e3, rtol=1e-12)
+    np.testing.assert_allclose(out["semi_axes_mm_per_N"], np.linalg.svd(CM, compute_uv=False) * 1e3, rtol=1e-10)
+    assert png.stat().st_size > 10_000
+    assert main(["compliance", "--tensions", "8,0,0,0", "--insertion-mm", "50", "--steps", "0"]) == 2
+    assert "steps" in capsys.readouterr().err
