@@ -117,3 +117,24 @@ def plot_compliance_ellipses(CMs: dict, path: str | Path | None = None, title: s
         fig.savefig(path, dpi=120)
         plt.close(fig)
     return fig
+
+
+def plot_fig11(tensions, insertions, lam, path: str | Path | None = None):
+    """Paper Fig. 11: lambda_1..3 of CM [mm/N] against insertion depth [mm], one colour per tension."""
+    plt = _pyplot()
+    d_mm = np.asarray(insertions) * 1e3
+    fig, axes = plt.subplots(1, 3, figsize=(13, 4.2))
+    colours = plt.cm.viridis(np.linspace(0, 0.9, len(tensions)))
+    for k, ax in enumerate(axes):
+        for tau, c, row in zip(tensions, colours, np.asarray(lam), strict=True):
+            ax.plot(d_mm, row[:, k] * 1e3, "o-", ms=3, color=c, label=f"{tau:g} N")
+        ax.set_xlabel("insertion depth [mm]")
+        ax.set_ylabel(f"lambda_{k + 1} [mm/N]")
+        ax.grid(alpha=0.3)
+    axes[0].legend(title="tendon 1 tension", fontsize=8)
+    fig.suptitle("Eigenvalues of the tip compliance matrix (paper Fig. 11)")
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+    return fig
