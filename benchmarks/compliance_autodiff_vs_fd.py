@@ -7,13 +7,12 @@ Writes benchmarks/results/compliance.json and benchmarks/results/compliance_fd_e
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import time
 from pathlib import Path
 
 import jax
 import numpy as np
+from _common import timings, write_result
 
 import tdct_jax as tdct
 from tdct_jax.plotting import plot_fd_error
@@ -29,12 +28,7 @@ STEPS_N = [10.0**-k for k in range(1, 10)]
 
 
 def _median_time(f, repeats):
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        jax.block_until_ready(f())
-        times.append(time.perf_counter() - t)
-    return float(np.median(times))
+    return float(np.median(timings(f, repeats)))
 
 
 def main() -> None:
@@ -84,15 +78,7 @@ def main() -> None:
             f"autodiff {t_ad * 1e3:6.1f} ms, FD {t_fd * 1e3:6.1f} ms ({t_fd / t_ad:.1f}x), one solve {t_solve * 1e3:5.1f} ms"
         )
 
-    result = dict(
-        date=time.strftime("%Y-%m-%d"),
-        machine=f"{platform.processor() or platform.machine()}, {jax.device_count()} x {jax.devices()[0].platform}",
-        jax=jax.__version__,
-        repeats=args.repeats,
-        compile_and_first_compliance_s=compile_s,
-        configs=rows,
-    )
-    (out / "compliance.json").write_text(json.dumps(result, indent=2) + "\n")
+    write_result(out / "compliance.json", repeats=args.repeats, compile_and_first_compliance_s=compile_s, configs=rows)
     plot_fd_error(rows, out / "compliance_fd_error.png")
     print(f"wrote {out / 'compliance.json'} and {out / 'compliance_fd_error.png'}")
 

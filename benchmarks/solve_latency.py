@@ -7,13 +7,12 @@ Writes benchmarks/results/latency.json. For steady numbers pin to one core: task
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import time
 from pathlib import Path
 
 import jax
 import numpy as np
+from _common import timings, write_result
 
 import tdct_jax as tdct
 from tdct_jax.shooting import _solve
@@ -46,12 +45,8 @@ def main() -> None:
     for name, (tensions, insertion, mass) in CONFIGS.items():
         act, load = tdct.Actuation(tensions, insertion), tdct.TipLoad.from_mass(mass)
         sol = tdct.solve(robot, act, load, steps=args.steps, throw=True)
-        times = []
-        for _ in range(args.repeats):
-            t = time.perf_counter()
-            jax.block_until_ready(tdct.solve(robot, act, load, steps=args.steps).position)
-            times.append(time.perf_counter() - t)
-        times_ms = np.array(times) * 1e3
+        times = timings(lambda act=act, load=load: tdct.solve(robot, act, load, steps=args.steps).position, args.repeats)
+        times_ms = times * 1e3
         row = dict(
             config=name,
             median_ms=float(np.median(times_ms)),
@@ -66,18 +61,14 @@ def main() -> None:
             f"{name:40s} median {row['median_ms']:7.2f} ms  p90 {row['p90_ms']:7.2f} ms  {row['iterations']} iterations  {row['speedup_vs_paper']:.0f}x the paper's 0.82 s"
         )
 
-    result = dict(
-        date=time.strftime("%Y-%m-%d"),
-        machine=f"{platform.processor() or platform.machine()}, {jax.device_count()} x {jax.devices()[0].platform}",
-        jax=jax.__version__,
+    write_result(
+        args.out,
         steps_per_segment=args.steps,
         repeats=args.repeats,
         compile_and_first_solve_s=compile_s,
         cache_entries=_solve._cache_size(),
         configs=rows,
     )
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
     print(f"wrote {args.out}")
 
 
