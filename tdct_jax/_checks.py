@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import math
+import numbers
 
 import jax
 import numpy as np
 
 
 def is_concrete(x) -> bool:
-    """True for values a user passed in; False for tracers and the placeholders pytrees carry."""
-    return not isinstance(x, jax.core.Tracer) and x is not None and type(x) is not object
+    """True for values a user passed in; False for tracers and the placeholders pytrees carry
+    (None, object(), jax's argument descriptions when lowering)."""
+    if isinstance(x, jax.core.Tracer):
+        return False
+    return isinstance(x, (numbers.Number, str, list, tuple, np.ndarray, np.generic, jax.Array))
 
 
 def as_array(name: str, x, shape: tuple[int, ...] | None = None):

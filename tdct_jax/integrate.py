@@ -27,13 +27,19 @@ def rk4(f, y0, s0, s1, steps: int, project=None, path: bool = False):
     """
     h = (s1 - s0) / steps
 
+    nodes = jnp.array([0.0, 0.5, 0.5, 1.0])
+    weights = jnp.array([1.0, 2.0, 2.0, 1.0]) / 6
+
     def step(y, i):
         s = s0 + i * h
-        k1 = f(s, y)
-        k2 = f(s + h / 2, _axpy(h / 2, k1, y))
-        k3 = f(s + h / 2, _axpy(h / 2, k2, y))
-        k4 = f(s + h, _axpy(h, k3, y))
-        incr = jax.tree.map(lambda a, b, c, d: (a + 2 * b + 2 * c + d) / 6, k1, k2, k3, k4)
+
+        def stage(j, c):
+            incr, k = c
+            k = f(s + nodes[j] * h, _axpy(nodes[j] * h, k, y))
+            return _axpy(weights[j], k, incr), k
+
+        zero = jax.tree.map(jnp.zeros_like, y)
+        incr, _ = lax.fori_loop(0, 4, stage, (zero, zero))
         y = _axpy(h, incr, y)
         if project is not None:
             y = project(y)

@@ -15,12 +15,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .loads import Actuation, TipLoad
-from .robot import Robot
+from .robot import SCALAR_FIELDS, Robot
 from .shooting import MAX_ITER, TOL, raise_if_failed, solve
 
 
 def _tip_pose_jacobian(solve_at, w, throw, solve_options):
-    """d(tip position, tip rotation vector)/dw, (6, n); the rotation part is vee(dR R^T), world frame."""
+    """(d(tip position, tip rotation vector)/dw, solution); (6, n), rotation part vee(dR R^T), world frame."""
 
     def pose(w):
         sol = solve_at(w)
@@ -31,8 +31,8 @@ def _tip_pose_jacobian(solve_at, w, throw, solve_options):
     J = jnp.concatenate([Jp, jnp.stack([A[2, 1], A[0, 2], A[1, 0]])], axis=0)
     if throw:
         raise_if_failed(sol, solve_options.get("tol", TOL), solve_options.get("max_iter", MAX_ITER))
-        return J
-    return jnp.where(sol.converged, J, jnp.nan)
+        return J, sol
+    return jnp.where(sol.converged, J, jnp.nan), sol
 
 
 def compliance(
@@ -51,14 +51,19 @@ def compliance(
     Returns:
         CM, shape (3, 3) (or (6, 6) with ``full``).
     """
+    J, _ = compliance_and_solution(robot, act, load, throw=throw, **solve_options)
+    return J if full else J[:3, :3]
+
+
+def compliance_and_solution(robot: Robot, act: Actuation, load: TipLoad | None = None, *, throw: bool = True, **solve_options):
+    """The 6x6 compliance of ``compliance(..., full=True)`` and the Solution it was taken at, in one solve."""
     load = TipLoad() if load is None else load
 
     def solve_at(w):
         return solve(robot, act, TipLoad(w[:3], w[3:]), **solve_options)
 
     w = jnp.concatenate([jnp.asarray(load.force), jnp.asarray(load.moment)])
-    J = _tip_pose_jacobian(solve_at, w, throw, solve_options)
-    return J if full else J[:3, :3]
+    return _tip_pose_jacobian(solve_at, w, throw, solve_options)
 
 
 def kinematic_jacobian(robot: Robot, act: Actuation, load: TipLoad | None = None, *, throw: bool = True, **solve_options):
@@ -73,7 +78,7 @@ def kinematic_jacobian(robot: Robot, act: Actuation, load: TipLoad | None = None
         return solve(robot, Actuation(w[:-1], w[-1]), load, **solve_options)
 
     w = jnp.concatenate([jnp.asarray(act.tensions), jnp.reshape(jnp.asarray(act.insertion), (1,))])
-    return _tip_pose_jacobian(solve_at, w, throw, solve_options)
+    return _tip_pose_jacobian(solve_at, w, throw, solve_options)[0]
 
 
 def parameter_jacobian(
@@ -84,16 +89,15 @@ def parameter_jacobian(
     Units follow the fields (e.g. m/Pa for E_silicone). Arguments as for ``compliance``.
     """
     load = TipLoad() if load is None else load
-    scalars = [f.name for f in dataclasses.fields(Robot) if f.name != "tendon_angles"]
     for p in params:
-        if p not in scalars:
-            raise ValueError(f"params: {p!r} is not a scalar Robot field; allowed: {scalars}")
+        if p not in SCALAR_FIELDS:
+            raise ValueError(f"params: {p!r} is not a scalar Robot field; allowed: {list(SCALAR_FIELDS)}")
 
     def solve_at(w):
         return solve(dataclasses.replace(robot, **{p: w[i] for i, p in enumerate(params)}), act, load, **solve_options)
 
     w = jnp.stack([jnp.asarray(getattr(robot, p)) for p in params])
-    return _tip_pose_jacobian(solve_at, w, throw, solve_options)
+    return _tip_pose_jacobian(solve_at, w, throw, solve_options)[0]
 
 
 def finite_difference_compliance(

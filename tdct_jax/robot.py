@@ -12,7 +12,7 @@ import numpy as np
 
 from ._checks import as_array, check_range, is_concrete
 
-_SCALARS = (
+SCALAR_FIELDS = (
     "length",
     "outer_diameter",
     "channel_diameter",
@@ -69,7 +69,7 @@ class Robot:
     density_tube: float = 6450.0
 
     def __post_init__(self):
-        for name in _SCALARS:
+        for name in SCALAR_FIELDS:
             object.__setattr__(self, name, as_array(name, getattr(self, name), ()))
         angles = self.tendon_angles
         if is_concrete(angles):

@@ -27,6 +27,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax import lax
 
 from .so3 import hat
 
@@ -95,7 +96,9 @@ def strains(seg: Segment, R, N, M):
     if not seg.tilt:
         return v, u
     rh = hat(seg.r)
-    for _ in range(NEWTON_STEPS):
+
+    def newton_step(_, w):
+        v, u = w[:3], w[3:]
         pb = _tendon_tangent(seg.r, v, u)
         norm = jnp.linalg.norm(pb, axis=-1)
         t = pb / norm[:, None]
@@ -113,9 +116,10 @@ def strains(seg: Segment, R, N, M):
         if seg.backbone:
             J = J.at[:2].set(jnp.eye(6)[:2])
             F = F.at[:2].set(0.0)
-        dw = jnp.linalg.solve(J, -F)
-        v, u = v + dw[:3], u + dw[3:]
-    return v, u
+        return w - jnp.linalg.solve(J, F)
+
+    w = lax.fori_loop(0, NEWTON_STEPS, newton_step, jnp.concatenate([v, u]))
+    return w[:3], w[3:]
 
 
 def rod_force(seg: Segment, y: State, v, u):

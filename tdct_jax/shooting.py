@@ -90,6 +90,11 @@ class Solution:
         return self.rotation[..., -1, :, :]
 
     @property
+    def base_wrench(self):
+        """(N(0), M(0)): the total force and moment at the base, the shooting unknowns, (6,)."""
+        return jnp.concatenate([self.total_force[..., 0, :], self.total_moment[..., 0, :]], axis=-1)
+
+    @property
     def tip_angle(self):
         """theta_tip: the tip tangent's angle in the z-y plane from +z, toward +y [rad]."""
         return tip_angle(self.tip_rotation)
@@ -195,11 +200,12 @@ STAGES = (1, 4, 16)
 """Load continuation: numbers of equal load stages tried in turn when Newton fails."""
 
 
-def _continuation(F_at, x0, tol, max_iter):
+def _continuation(F_at, x0, x_straight, tol, max_iter):
     """Solves F_at(1)(x) = 0 from x0, ramping all loads in stages when plain Newton fails.
 
-    F_at(lam) is the residual with tensions, tip load and gravity scaled by lam; x0 is linear in
-    the loads, so lam * x0 starts each ramp. Returns (root, (residual, total Newton steps)).
+    F_at(lam) is the residual with tensions, tip load and gravity scaled by lam; the straight-rod
+    guess is linear in the loads, so lam * x_straight starts each ramp. Returns
+    (root, (residual, total Newton steps)).
     """
 
     def not_done(c):
@@ -208,7 +214,7 @@ def _continuation(F_at, x0, tol, max_iter):
     def body(c):
         x, r, it, K, stage, _ = c
         lam = stage / K
-        guess = jnp.where(stage == 1, lam * x0, x)
+        guess = jnp.where(stage == 1, jnp.where(K == STAGES[0], x0, lam * x_straight), x)
         x_new, (r_new, it_new) = _newton(F_at(lam), guess, tol, max_iter)
         ok = jnp.max(jnp.abs(r_new)) <= tol
         K_next = jnp.where(ok, K, K * (STAGES[1] // STAGES[0]))
@@ -226,9 +232,11 @@ def _tangent_solve(g, y):
 
 
 @jax.jit(static_argnames=("opts",))
-def _solve(robot, act, load, gravity, tol, max_iter, opts: SolverOptions) -> Solution:
+def _solve(robot, act, load, gravity, tol, max_iter, guess, opts: SolverOptions) -> Solution:
     F_c = _scale(robot, act, load, gravity)
-    x0 = _straight_guess(robot, act, load, gravity, F_c)
+    x_straight = _straight_guess(robot, act, load, gravity, F_c)
+    x_warm = jnp.concatenate([guess[:3] / F_c, guess[3:] / (F_c * robot.length)])
+    x0 = jnp.where(jnp.all(jnp.isfinite(guess)), x_warm, x_straight)
 
     def F_at(lam):
         act_lam = dataclasses.replace(act, tensions=lam * act.tensions)
@@ -236,7 +244,7 @@ def _solve(robot, act, load, gravity, tol, max_iter, opts: SolverOptions) -> Sol
         return lambda x: _integrate(robot, act_lam, load_lam, lam * gravity, opts, x, F_c)[0]
 
     def solve_root(F, x0):
-        return _continuation(F_at, x0, tol, max_iter)
+        return _continuation(F_at, x0, x_straight, tol, max_iter)
 
     x, (_, iterations) = lax.custom_root(F_at(1.0), x0, solve_root, _tangent_solve, has_aux=True)
     res, ys = _integrate(robot, act, load, gravity, opts, x, F_c, path=True)
@@ -291,6 +299,7 @@ def solve(
     tendon_model: str = "exact",
     tol: float = TOL,
     max_iter: int = MAX_ITER,
+    guess=None,
     throw: bool = False,
 ) -> Solution:
     """Static shape of the TDCT robot (paper Sec. II; model-notes) by Newton shooting.
@@ -310,6 +319,8 @@ def solve(
         tendon_model: "exact" (default) or "paper", see SolverOptions.
         tol: tolerance on the scaled tip residual.
         max_iter: most Newton iterations per load stage (see STAGES; ``sol.iterations`` counts all).
+        guess: base force and moment (N(0) [N], M(0) [N m]), shape (6,), to start Newton from,
+            e.g. a neighbouring solution's ``base_wrench``; None starts from the straight rod.
         throw: raise ConvergenceError if the solve did not converge (needs concrete values).
 
     Returns:
@@ -319,17 +330,23 @@ def solve(
         ValueError: bad input (names field, value and allowed range).
         ConvergenceError: with ``throw=True``, when the residual stays above ``tol``.
     """
-    opts = SolverOptions(steps=steps, transition=transition, tendon_model=tendon_model)
-    check_range("tol", tol, 0.0, lo_open=True)
-    if not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
-        raise ValueError(f"max_iter = {max_iter!r} must be an integer >= 1")
+    opts = solver_options(steps, transition, tendon_model, tol, max_iter)
     load = TipLoad() if load is None else load
     gravity = jnp.zeros(3) if gravity is None else as_array("gravity", gravity, (3,))
+    guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
     check_inputs(robot, act, load)
-    sol = _solve(robot, act, load, gravity, tol, max_iter, opts)
+    sol = _solve(robot, act, load, gravity, tol, max_iter, guess, opts)
     if throw:
         raise_if_failed(sol, tol, max_iter)
     return sol
+
+
+def solver_options(steps, transition, tendon_model, tol, max_iter) -> SolverOptions:
+    """Checks the solver settings; returns the static part."""
+    check_range("tol", tol, 0.0, lo_open=True)
+    if not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+        raise ValueError(f"max_iter = {max_iter!r} must be an integer >= 1")
+    return SolverOptions(steps=steps, transition=transition, tendon_model=tendon_model)
 
 
 def check_inputs(robot: Robot, act: Actuation, load: TipLoad) -> None:

@@ -1,0 +1,341 @@
+"""Batched sweeps: many solves through one compiled ``vmap``, in chunks of bounded size, with a
+progress bar, sharded over every device JAX sees.
+
+A sweep varies named inputs around a base configuration: the actuation ("tensions" [N],
+"insertion" [m]), the tip load ("force" [N], "moment" [N m], "tip_mass" [kg], whose weight adds
+to the force) and any scalar Robot field ("E_silicone" [Pa], "tendon_offset" [m], ...). A
+``grid`` takes the product of axes; a ``batch`` zips columns of equal length.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from time import perf_counter
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+from jax.sharding import Mesh
+from jax.sharding import PartitionSpec as P
+from tqdm.auto import tqdm
+
+from ._checks import as_array, check_range
+from .loads import STANDARD_GRAVITY, Actuation, TipLoad
+from .mechanics import compliance_and_solution
+from .robot import SCALAR_FIELDS, Robot
+from .shooting import MAX_ITER, TOL, check_inputs, solve, solver_options
+from .so3 import tip_angle
+
+DEFAULT_CHUNK = 256
+"""Configurations per compiled call (bounds memory; a smaller sweep rounds up to a power of two)."""
+AXIS = "batch"
+"""Name of the device-mesh axis the batch is sharded over."""
+
+
+def _point_shape(name: str, robot: Robot) -> tuple[int, ...]:
+    shapes = {"tensions": (robot.n_tendons,), "insertion": (), "force": (3,), "moment": (3,), "tip_mass": ()}
+    if name in shapes:
+        return shapes[name]
+    if name in SCALAR_FIELDS:
+        return ()
+    raise ValueError(f"cannot sweep {name!r}: allowed names are {sorted(shapes)} and the Robot fields {list(SCALAR_FIELDS)}")
+
+
+def _check_values(name: str, values, robot: Robot, act: Actuation) -> np.ndarray:
+    """Validates one column (leading axis = points); errors name the field, the point and the range."""
+    shape = _point_shape(name, robot)
+    v = np.asarray(values, dtype=np.float64) if np.ndim(values) else np.reshape(values, (1,)).astype(np.float64)
+    if v.ndim == 0 or v.shape[1:] != shape:
+        raise ValueError(f"{name}: each point must have shape {shape}, got values of shape {np.shape(values)}")
+    v = as_array(name, v, v.shape)
+
+    def first_outside(lo, hi, unit, **kw):
+        bad = np.flatnonzero(((v < lo) | (v > hi)).reshape(len(v), -1).any(axis=1))
+        if bad.size:
+            check_range(f"{name}[{bad[0]}]", v[bad[0]], lo, hi, unit=unit, **kw)
+
+    if name in ("tensions", "tip_mass"):
+        first_outside(0.0, math.inf, " N" if name == "tensions" else " kg")
+    elif name == "insertion":
+        first_outside(0.0, float(robot.length), f" m (0 to the robot length {float(robot.length):g} m)")
+    elif name in SCALAR_FIELDS:
+        for x in (v.min(), v.max()):
+            dataclasses.replace(robot, **{name: x})
+    return v
+
+
+def _columns(robot, act, grid, batch):
+    """(columns with a leading point axis, sweep shape, grid axes or None)."""
+    if (grid is None) == (batch is None):
+        raise ValueError("give exactly one of grid= (a product of axes) and batch= (columns zipped point by point)")
+    named = grid if grid is not None else batch
+    if not isinstance(named, Mapping) or not named:
+        raise ValueError("grid / batch must be a non-empty mapping from input names to arrays of values")
+    values = {k: _check_values(k, v, robot, act) for k, v in named.items()}
+    if batch is not None:
+        lengths = {k: len(v) for k, v in values.items()}
+        if len(set(lengths.values())) != 1:
+            raise ValueError(f"batch columns must have the same number of points, got {lengths}")
+        return values, (next(iter(lengths.values())),), None
+    shape = tuple(len(v) for v in values.values())
+    index = np.meshgrid(*(np.arange(n) for n in shape), indexing="ij")
+    return {k: v[i.ravel()] for (k, v), i in zip(values.items(), index)}, shape, values
+
+
+def configure(base, point):
+    """The robot, actuation and load of one point: the base with the point's values swapped in."""
+    robot, act, load, gravity = base
+    fields = {k: v for k, v in point.items() if k in SCALAR_FIELDS}
+    robot = dataclasses.replace(robot, **fields) if fields else robot
+    act = Actuation(point.get("tensions", act.tensions), point.get("insertion", act.insertion))
+    force = point.get("force", load.force) + point.get("tip_mass", 0.0) * gravity
+    return robot, act, TipLoad(force, point.get("moment", load.moment))
+
+
+@dataclasses.dataclass(frozen=True)
+class Kernel:
+    """What runs per point (static: each distinct value compiles once per chunk size).
+
+    ``function(base, point, kernel)`` returns a dict of arrays; ``solve_options`` are keyword
+    arguments for ``tdct.solve`` (gravity excepted: it is part of ``base`` and traced).
+    """
+
+    function: Callable
+    solve_options: tuple = ()
+    shapes: bool = False
+    compliance: bool = False
+    mesh: Mesh | None = None
+
+    @property
+    def options(self) -> dict:
+        return dict(self.solve_options)
+
+
+@jax.jit(static_argnames=("kernel",))
+def _run_chunk(base, points, kernel: Kernel):
+    def lanes(base, points):
+        return jax.vmap(lambda p: kernel.function(base, p, kernel))(points)
+
+    if kernel.mesh is None:
+        return lanes(base, points)
+    return jax.shard_map(lanes, mesh=kernel.mesh, in_specs=(P(), P(AXIS)), out_specs=P(AXIS))(base, points)
+
+
+def mesh_for(devices) -> Mesh | None:
+    """A 1-D mesh over ``devices`` (default: all of ``jax.devices()``), or None for one device."""
+    devices = jax.devices() if devices is None else list(devices)
+    return Mesh(np.asarray(devices), (AXIS,)) if len(devices) > 1 else None
+
+
+def run_batched(kernel: Kernel, base, points: dict, *, chunk_size=DEFAULT_CHUNK, progress=True, desc="solving", per_point=1):
+    """Runs ``kernel`` over the leading axis of ``points`` in chunks; returns numpy outputs.
+
+    Every chunk has the same static shape (the last is padded by repeating its final point), so
+    one compile serves the whole sweep and any later sweep with the same chunk size.
+    ``per_point`` is the number of solves each point stands for (the progress bar counts solves).
+    """
+    if not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
+        raise ValueError(f"chunk_size = {chunk_size!r} must be an integer >= 1")
+    n = len(next(iter(points.values())))
+    n_dev = 1 if kernel.mesh is None else kernel.mesh.size
+    chunk = min(chunk_size, 1 << max(n - 1, 0).bit_length())
+    chunk = -(-chunk // n_dev) * n_dev
+    parts = []
+    with tqdm(total=n * per_point, unit="solve", desc=desc, disable=not progress, dynamic_ncols=True) as bar:
+        for start in range(0, n, chunk):
+            bar.set_postfix_str("compiling" if start == 0 else "")
+            index = np.minimum(np.arange(start, start + chunk), n - 1)
+            out = jax.device_get(_run_chunk(base, {k: v[index] for k, v in points.items()}, kernel))
+            m = min(chunk, n - start)
+            parts.append({k: v[:m] for k, v in out.items()})
+            bar.update(m * per_point)
+        bar.set_postfix_str("")
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def _solve_point(base, point, kernel: Kernel, guess=None):
+    robot, act, load = configure(base, point)
+    options = dict(kernel.options, gravity=base[3], guess=guess)
+    if kernel.compliance:
+        J, sol = compliance_and_solution(robot, act, load, throw=False, **options)
+    else:
+        sol = solve(robot, act, load, **options)
+    out = dict(
+        tip_position=sol.tip_position,
+        tip_rotation=sol.tip_rotation,
+        converged=sol.converged,
+        iterations=sol.iterations,
+        residual_norm=sol.residual_norm,
+        base_wrench=sol.base_wrench,
+    )
+    if kernel.shapes:
+        out.update(s=sol.s, position=sol.position)
+    if kernel.compliance:
+        out["compliance"] = J[:3, :3]
+    return out
+
+
+def _solve_path(base, path, kernel: Kernel):
+    """Solves the points of a path in order, each started from the last converged neighbour."""
+
+    def step(guess, point):
+        out = _solve_point(base, point, kernel, guess)
+        return jnp.where(out["converged"], out["base_wrench"], guess), out
+
+    return lax.scan(step, jnp.full(6, jnp.nan), path)[1]
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepResult:
+    """Outputs of ``sweep``, numpy arrays whose leading axes have the sweep's ``shape``.
+
+    Attributes:
+        shape: grid shape (one axis per grid name, in order) or (n_points,) for a batch.
+        axes: the grid's axis values by name (None for a batch).
+        inputs: each swept input at every point, shape ``shape + point shape``.
+        tip_position [m], tip_rotation, converged, iterations, residual_norm, base_wrench
+            (N(0) [N], M(0) [N m]): as on ``Solution``.
+        s, position: arc length [m] and shape [m] at the RK4 nodes (with ``shapes=True``).
+        compliance: 3x3 tip compliance [m/N] (with ``compliance=True``; NaN where not converged).
+        seconds: wall time of the sweep, compiles included.
+    """
+
+    shape: tuple
+    axes: dict | None
+    inputs: dict
+    tip_position: np.ndarray
+    tip_rotation: np.ndarray
+    converged: np.ndarray
+    iterations: np.ndarray
+    residual_norm: np.ndarray
+    base_wrench: np.ndarray
+    s: np.ndarray | None = None
+    position: np.ndarray | None = None
+    compliance: np.ndarray | None = None
+    seconds: float = float("nan")
+
+    @property
+    def tip_angle(self) -> np.ndarray:
+        """theta_tip [rad] (see ``Solution.tip_angle``)."""
+        return np.asarray(tip_angle(self.tip_rotation))
+
+    @property
+    def n_failed(self) -> int:
+        return int(np.size(self.converged) - np.count_nonzero(self.converged))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Every array by name: inputs as ``input_<name>``, grid axes as ``axis_<name>``."""
+        out = {f"input_{k}": v for k, v in self.inputs.items()}
+        out.update({f"axis_{k}": v for k, v in (self.axes or {}).items()})
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, np.ndarray):
+                out[f.name] = v
+        out["tip_angle"] = self.tip_angle
+        out["shape"] = np.asarray(self.shape)
+        return out
+
+    def save_npz(self, path) -> Path:
+        """Writes every array (see ``arrays``) to a compressed .npz file."""
+        path = Path(path)
+        np.savez_compressed(path, **self.arrays())
+        return path
+
+    def save_csv(self, path) -> Path:
+        """Writes one row per point: the swept inputs and the tip outputs, SI units in the header."""
+        path = Path(path)
+        n = int(np.prod(self.shape))
+        columns: dict[str, np.ndarray] = {}
+        for k, v in self.inputs.items():
+            v = v.reshape(n, -1)
+            labels = [k] if v.shape[1] == 1 else [f"{k}_{i + 1}" for i in range(v.shape[1])]
+            columns.update({f"{label}_{_unit(k)}": v[:, i] for i, label in enumerate(labels)})
+        tip = self.tip_position.reshape(n, 3)
+        columns.update({f"tip_{c}_m": tip[:, i] for i, c in enumerate("xyz")})
+        columns["tip_angle_rad"] = self.tip_angle.reshape(n)
+        columns["converged"] = self.converged.reshape(n).astype(int)
+        columns["iterations"] = self.iterations.reshape(n)
+        columns["residual_norm"] = self.residual_norm.reshape(n)
+        with path.open("w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(columns)
+            w.writerows(zip(*(c.tolist() for c in columns.values())))
+        return path
+
+
+def _unit(name: str) -> str:
+    units = {"tensions": "N", "insertion": "m", "force": "N", "moment": "Nm", "tip_mass": "kg", "E_silicone": "Pa", "E_tube": "Pa"}
+    if name in units:
+        return units[name]
+    return "kg_per_m3" if name.startswith("density") else "1" if name.startswith("nu") else "m"
+
+
+def sweep(
+    robot: Robot,
+    act: Actuation | None = None,
+    load: TipLoad | None = None,
+    *,
+    grid: Mapping | None = None,
+    batch: Mapping | None = None,
+    warm_start: bool = False,
+    shapes: bool = False,
+    compliance: bool = False,
+    chunk_size: int = DEFAULT_CHUNK,
+    progress: bool = True,
+    devices=None,
+    steps: int = 50,
+    gravity=STANDARD_GRAVITY,
+    transition: str = "balanced",
+    tendon_model: str = "exact",
+    tol: float = TOL,
+    max_iter: int = MAX_ITER,
+) -> SweepResult:
+    """Solves many configurations at once: ``jax.vmap`` of ``tdct.solve`` in bounded chunks.
+
+    Args:
+        robot, act, load: the base configuration (defaults: no tension, no tube, no tip load).
+        grid: {name: values}: every combination of the axes, first axis slowest. Values have a
+            leading axis of points: "tensions" (k, n_tendons) [N], "insertion" (k,) [m], "force"
+            and "moment" (k, 3) [N], [N m], "tip_mass" (k,) [kg] (weight added to the force),
+            or any scalar Robot field (k,).
+        batch: {name: values} with the same leading length, zipped point by point.
+        warm_start: (grid only) solve along the last axis in order, each solve started from its
+            neighbour's base wrench; the other axes run in parallel.
+        shapes: also return the full shape of every solution (memory: 2 steps + 1 nodes each).
+        compliance: also return the exact 3x3 tip compliance (eq. 41) at every point.
+        chunk_size: configurations per compiled call; bounds memory. With several devices each
+            chunk is split evenly over them.
+        progress: show a progress bar on the terminal.
+        devices: devices to shard each chunk over (default: all of ``jax.devices()``).
+        steps, gravity, transition, tendon_model, tol, max_iter: as for ``tdct.solve``.
+
+    Returns:
+        SweepResult; check ``converged`` (or ``n_failed``).
+    """
+    robot = Robot() if robot is None else robot
+    act = Actuation(np.zeros(robot.n_tendons)) if act is None else act
+    load = TipLoad() if load is None else load
+    points, shape, axes = _columns(robot, act, grid, batch)
+    solver_options(steps, transition, tendon_model, tol, max_iter)
+    check_inputs(robot, act, load)
+    options = (("steps", steps), ("transition", transition), ("tendon_model", tendon_model), ("tol", tol), ("max_iter", max_iter))
+    g = jnp.zeros(3) if gravity is None else as_array("gravity", gravity, (3,))
+    function, per_point = _solve_point, 1
+    if warm_start:
+        if grid is None:
+            raise ValueError("warm_start=True needs grid=: the solves run in order along the grid's last axis")
+        per_point = shape[-1]
+        points = {k: v.reshape(-1, per_point, *v.shape[1:]) for k, v in points.items()}
+        function = _solve_path
+    kernel = Kernel(function, options, shapes, compliance, mesh_for(devices))
+    start = perf_counter()
+    out = run_batched(kernel, (robot, act, load, g), points, chunk_size=chunk_size, progress=progress, per_point=per_point)
+    seconds = perf_counter() - start
+    reshape = {k: v.reshape(shape + v.shape[1 + warm_start :]) for k, v in out.items()}
+    inputs = {k: v.reshape(shape + v.shape[1 + warm_start :]) for k, v in points.items()}
+    return SweepResult(shape=shape, axes=axes, inputs=inputs, seconds=seconds, **reshape)
