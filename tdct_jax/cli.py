@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -51,6 +52,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--csv", metavar="shape.csv", help="save the shape as s_mm,x_mm,y_mm,z_mm")
     c = verbs.add_parser("compliance", parents=[common], help="exact tip compliance matrix (eq. 41) and its ellipsoid")
     c.add_argument("--plot", metavar="ellipse.png", help="save the ellipsoid projected on its two largest axes")
+    r = verbs.add_parser("reproduce", help="regenerate the paper's simulation figures and headline numbers")
+    r.add_argument("--out", default="tdct-reproduce", metavar="DIR", help="output folder (default tdct-reproduce)")
+    r.add_argument("--quick", action="store_true", help="coarse grids and no parameter fit (about a minute)")
+    r.add_argument("--robot", metavar="robot.toml", help="TOML file of Robot fields in SI units")
+    r.add_argument("--quiet", action="store_true", help="no progress output")
     return parser
 
 
@@ -125,10 +131,23 @@ def _solve_command(args) -> int:
     return 0
 
 
+def _reproduce_command(args) -> int:
+    from .reproduce import reproduce
+
+    robot = Robot.from_toml(args.robot) if args.robot else Robot()
+    summary = reproduce(args.out, quick=args.quick, robot=robot, progress=not args.quiet)
+    print((Path(args.out) / "summary.md").read_text())
+    failed = [r for r in summary["headlines"] if "NOT converged" in r["note"]]
+    if failed:
+        print(f"tdct: error: {len(failed)} headline result(s) did not converge (see summary.md)", file=sys.stderr)
+        return 1
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code (0 ok, 1 not converged, 2 bad input)."""
     args = _parser().parse_args(argv)
-    command = {"solve": _solve_command, "compliance": _compliance_command}[args.verb]
+    command = {"solve": _solve_command, "compliance": _compliance_command, "reproduce": _reproduce_command}[args.verb]
     try:
         return command(args)
     except ValueError as e:

@@ -131,7 +131,9 @@ class Optimum(NamedTuple):
     iterations: jax.Array
 
 
-def insertion_optimum(robot, act, load, lo, hi, *, gravity=STANDARD_GRAVITY, tol=SLOPE_TOL, max_iter=30, **solve_options) -> Optimum:
+def insertion_optimum(
+    robot, act, load, lo, hi, *, gravity=STANDARD_GRAVITY, tol=SLOPE_TOL, max_iter=30, **solve_options
+) -> Optimum:
     """Refines the insertion that maximises y_tip inside a bracket [lo, hi] [m] of the slope's sign change.
 
     The Illinois (modified regula falsi) method on the exact slope dy/dd from autodiff: no
@@ -154,7 +156,10 @@ def insertion_optimum(robot, act, load, lo, hi, *, gravity=STANDARD_GRAVITY, tol
         x = jnp.where(it == 0, lo, jnp.where(it == 1, hi, (a * gb - b * ga) / (gb - ga)))
         y, g, ok_x = probe(x)
         keep = (it == 1) | (g * gb > 0)
-        a, ga = jnp.where(it == 0, x, jnp.where(keep, a, b)), jnp.where(it == 0, g, jnp.where(keep, ga / jnp.where(it == 1, 1, 2), gb))
+        a, ga = (
+            jnp.where(it == 0, x, jnp.where(keep, a, b)),
+            jnp.where(it == 0, g, jnp.where(keep, ga / jnp.where(it == 1, 1, 2), gb)),
+        )
         b, gb = jnp.where(it == 0, b, x), jnp.where(it == 0, gb, g)
         return a, ga, b, gb, y, ok & ok_x, it + 1
 
@@ -218,7 +223,9 @@ def _batch(robot, act, load, grid, batch, steps, transition, tendon_model, solve
         points, shape, axes = {"insertion": np.asarray(act.insertion).reshape(1)}, (), None
     else:
         points, shape, axes = _columns(robot, act, grid, batch)
-    options = dict(steps=steps, transition=transition, tendon_model=tendon_model, solve_tol=solve_tol, solve_max_iter=solve_max_iter)
+    options = dict(
+        steps=steps, transition=transition, tendon_model=tendon_model, solve_tol=solve_tol, solve_max_iter=solve_max_iter
+    )
     return robot, act, load, points, shape, axes, options
 
 
@@ -246,8 +253,12 @@ def load_capacity(
     Returns:
         GridResult with values mass [kg], reachable, converged, iterations.
     """
-    robot, act, load, points, shape, axes, options = _batch(robot, act, None, grid, batch, steps, transition, tendon_model, solve_tol, solve_max_iter)
-    kernel = Kernel(_capacity_point, tuple(dict(options, height=height, tol=tol, max_iter=max_iter).items()), mesh=mesh_for(devices))
+    robot, act, load, points, shape, axes, options = _batch(
+        robot, act, None, grid, batch, steps, transition, tendon_model, solve_tol, solve_max_iter
+    )
+    kernel = Kernel(
+        _capacity_point, tuple(dict(options, height=height, tol=tol, max_iter=max_iter).items()), mesh=mesh_for(devices)
+    )
     start = perf_counter()
     g = jnp.asarray(gravity, dtype=float)
     out = run_batched(kernel, (robot, act, load, g), points, chunk_size=chunk_size, progress=progress, desc="load capacity")
@@ -289,12 +300,25 @@ def optimal_insertion(
         raise ValueError("optimal_insertion: the insertion is what is optimised; do not put it in grid")
     if not isinstance(n_curve, (int, np.integer)) or n_curve < 3:
         raise ValueError(f"n_curve = {n_curve!r} must be an integer >= 3")
-    robot, act, load, points, shape, axes, options = _batch(robot, act, load, grid, None, steps, transition, tendon_model, solve_tol, solve_max_iter)
+    robot, act, load, points, shape, axes, options = _batch(
+        robot, act, load, grid, None, steps, transition, tendon_model, solve_tol, solve_max_iter
+    )
     start = perf_counter()
     depths = np.linspace(0.0, float(robot.length), n_curve)
     curve = sweep(
-        robot, act, load, grid={**(grid or {}), "insertion": depths}, chunk_size=chunk_size, progress=progress, devices=devices,
-        gravity=gravity, steps=steps, transition=transition, tendon_model=tendon_model, tol=solve_tol, max_iter=solve_max_iter,
+        robot,
+        act,
+        load,
+        grid={**(grid or {}), "insertion": depths},
+        chunk_size=chunk_size,
+        progress=progress,
+        devices=devices,
+        gravity=gravity,
+        steps=steps,
+        transition=transition,
+        tendon_model=tendon_model,
+        tol=solve_tol,
+        max_iter=solve_max_iter,
     )
     heights = curve.tip_position[..., 1].reshape(-1, n_curve)
     k = np.argmax(heights, axis=1)

@@ -79,7 +79,9 @@ def fig11_eigenvalues(robot: Robot, tensions=FIG11_TENSIONS, insertions=FIG11_IN
     Returns:
         Array (len(tensions), len(insertions), 3), ascending; NaN where a solve did not converge.
     """
-    res = sweep(robot, grid={"tensions": tendon1(robot, tensions), "insertion": np.asarray(insertions)}, compliance=True, **options)
+    res = sweep(
+        robot, grid={"tensions": tendon1(robot, tensions), "insertion": np.asarray(insertions)}, compliance=True, **options
+    )
     return np.asarray(compliance_ellipsoid(res.compliance).eigenvalues)
 
 
@@ -111,6 +113,12 @@ def fig13_optima(robot: Robot, tension: float, masses=FIG13_MASSES, n_curve: int
 def fig14_capacities(robot: Robot, tensions=CAPACITY_TENSIONS, insertions=FIG9_INSERTIONS, **options):
     """Fig. 14: load capacity [kg] (tip brought to y = 0) on a tendon-1 tension x insertion grid."""
     return load_capacity(robot, grid={"tensions": tendon1(robot, tensions), "insertion": np.asarray(insertions)}, **options)
+
+
+def ten_capacities(robot: Robot, **options):
+    """The ten load capacities the paper reports (Sec. V.A): insertion (0, 70 mm) x tendon 1 at 6..10 N."""
+    grid = {"insertion": np.asarray(CAPACITY_INSERTIONS), "tensions": tendon1(robot, CAPACITY_TENSIONS)}
+    return load_capacity(robot, grid=grid, **options)
 
 
 def bending_range(robot: Robot, tensions=TABLE3_TENSIONS, insertions=TABLE3_INSERTIONS, masses=TABLE3_MASSES, **options):
@@ -164,7 +172,9 @@ def fit_load_capacities(
         step = np.linalg.lstsq(np.asarray(J), -np.asarray(r), rcond=None)[0]
         x = x + step
         if progress:
-            progress(f"  fit iteration {it}: rms misfit {100 * np.sqrt(np.mean(np.square(r))):.3f}%, step {np.abs(step).max():.2e}")
+            progress(
+                f"  fit iteration {it}: rms misfit {100 * np.sqrt(np.mean(np.square(r))):.3f}%, step {np.abs(step).max():.2e}"
+            )
         if np.all(ok) and np.abs(step).max() < tol:
             converged = True
             break

@@ -18,6 +18,15 @@ def _pyplot():
     return plt
 
 
+def _finish(fig, path):
+    """Saves the figure as a PNG when a path is given (and closes it); returns it either way."""
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=120)
+        _pyplot().close(fig)
+    return fig
+
+
 def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, title: str | None = None):
     """Side view (world z-y plane) and 3D view of one solved shape; the tube part drawn thick.
 
@@ -59,11 +68,7 @@ def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, 
     ax3.set_title("3D (gravity along -y)")
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-    return fig
+    return _finish(fig, path)
 
 
 def plot_fd_error(rows, path: str | Path):
@@ -82,9 +87,7 @@ def plot_fd_error(rows, path: str | Path):
     ax.set_title("Central differences against the exact (autodiff) CM")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _finish(fig, path)
 
 
 def plot_compliance_ellipses(CMs: dict, path: str | Path | None = None, title: str | None = None):
@@ -112,11 +115,7 @@ def plot_compliance_ellipses(CMs: dict, path: str | Path | None = None, title: s
     ax.set_title(title or "compliance ellipse (tip displacement per N of tip force)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-    return fig
+    return _finish(fig, path)
 
 
 def plot_fig11(tensions, insertions, lam, path: str | Path | None = None):
@@ -133,8 +132,133 @@ def plot_fig11(tensions, insertions, lam, path: str | Path | None = None):
         ax.grid(alpha=0.3)
     axes[0].legend(title="tendon 1 tension", fontsize=8)
     fig.suptitle("Eigenvalues of the tip compliance matrix (paper Fig. 11)")
-    fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-    return fig
+    return _finish(fig, path)
+
+
+def _tube_mask(s, insertion):
+    return np.asarray(s) <= insertion + 1e-12 if insertion > 0 else np.zeros(np.shape(s), bool)
+
+
+def plot_fig8a(res, path: str | Path | None = None):
+    """Paper Fig. 8A: side views of the shape as the tube goes in; arrow: the tip's motion.
+
+    Args:
+        res: SweepResult of ``paper.fig8a_shapes`` (shapes=True; insertion axis first).
+    """
+    plt = _pyplot()
+    depths = np.asarray(res.axes["insertion"])
+    tension = float(np.asarray(res.axes["tensions"])[0, 0])
+    fig, ax = plt.subplots(figsize=(7.5, 5.2))
+    colours = plt.cm.plasma(np.linspace(0, 0.85, len(depths)))
+    for i, (d, c) in enumerate(zip(depths, colours, strict=True)):
+        p = res.position[i, 0] * 1e3
+        tube = _tube_mask(res.s[i, 0], d)
+        ax.plot(p[:, 2], p[:, 1], color=c, lw=2, label=f"d = {d * 1e3:.0f} mm")
+        if tube.any():
+            ax.plot(p[tube, 2], p[tube, 1], color=c, lw=5, alpha=0.5, solid_capstyle="butt")
+    tips = res.tip_position[:, 0] * 1e3
+    ax.annotate("", xy=tips[-1, [2, 1]], xytext=tips[0, [2, 1]], arrowprops=dict(arrowstyle="->", color="red", lw=2))
+    ax.axhline(0, color="0.8", lw=0.8, zorder=0)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("z [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_title(f"Shape as the tube is inserted (tendon 1 at {tension:g} N; thick: with tube)")
+    ax.legend(fontsize=8, loc="lower left")
+    ax.grid(alpha=0.3)
+    return _finish(fig, path)
+
+
+def plot_fig8b(res, path: str | Path | None = None):
+    """Paper Fig. 8B: tip workspace without (curve, d = 0) and with the insertion degree of freedom.
+
+    Args:
+        res: SweepResult of ``paper.tip_pose_grid`` (tension axis first, insertion second).
+    """
+    plt = _pyplot()
+    tip = res.tip_position * 1e3
+    fig, ax = plt.subplots(figsize=(6.8, 5.6))
+    ax.plot(tip[..., 2].ravel(), tip[..., 1].ravel(), ".", color="0.6", ms=4, label="grid points (tension x insertion)")
+    edge = np.concatenate([tip[:, 0], tip[-1, 1:], tip[::-1, -1][1:], tip[0, ::-1][1:]])
+    ax.plot(edge[:, 2], edge[:, 1], "--", color="red", lw=1.8, label="workspace with insertion")
+    ax.plot(tip[:, 0, 2], tip[:, 0, 1], "-", color="black", lw=2.5, label="tendon only (d = 0 mm)")
+    depths = np.asarray(res.axes["insertion"]) * 1e3
+    taus = np.asarray(res.axes["tensions"])[:, 0]
+    ax.set_xlabel("z_tip [mm]")
+    ax.set_ylabel("y_tip [mm]")
+    ax.set_title(f"Tip workspace: tendon 1 at {taus[0]:g}-{taus[-1]:g} N, insertion {depths[0]:g}-{depths[-1]:g} mm")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _finish(fig, path)
+
+
+def plot_fig9(res, path: str | Path | None = None):
+    """Paper Fig. 9A-C: z_tip, y_tip [mm] and theta_tip [deg] against insertion, one line per tension."""
+    plt = _pyplot()
+    depths = np.asarray(res.axes["insertion"]) * 1e3
+    taus = np.asarray(res.axes["tensions"])[:, 0]
+    values = (res.tip_position[..., 2] * 1e3, res.tip_position[..., 1] * 1e3, np.degrees(res.tip_angle))
+    labels = ("(A) z_tip [mm]", "(B) y_tip [mm]", "(C) theta_tip [deg]")
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.4))
+    colours = plt.cm.viridis(np.linspace(0, 0.95, len(taus)))
+    for ax, v, label in zip(axes, values, labels, strict=True):
+        for tau, c, row in zip(taus, colours, v, strict=True):
+            ax.plot(depths, row, "o-", ms=2.5, color=c, label=f"{tau:g} N")
+        ax.set_xlabel("insertion depth [mm]")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[2].legend(title="tendon 1", fontsize=7, ncol=2)
+    fig.suptitle("Tip pose against tube insertion, no tip load (paper Fig. 9)")
+    return _finish(fig, path)
+
+
+def plot_fig13(results: dict, path: str | Path | None = None):
+    """Paper Fig. 13: y_tip [mm] against insertion [mm] for several tip masses, optimum as a black dot.
+
+    Args:
+        results: {tension [N]: GridResult of ``paper.fig13_optima``}, one panel each.
+    """
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, len(results), figsize=(6.2 * len(results), 4.6), squeeze=False)
+    for ax, (tension, r), letter in zip(axes[0], results.items(), "ABCD", strict=False):
+        masses = np.asarray(r.axes["tip_mass"]) * 1e3
+        colours = plt.cm.cividis(np.linspace(0, 0.9, len(masses)))
+        for i, (m, c) in enumerate(zip(masses, colours, strict=True)):
+            ax.plot(r.curve_insertion * 1e3, r.curve_height[i] * 1e3, "-", color=c, label=f"{m:g} g")
+            ax.plot(r.insertion[i] * 1e3, r.height[i] * 1e3, "o", color="black", ms=5)
+        ax.plot([], [], "o", color="black", ms=5, label="maximum of y_tip")
+        ax.set_xlabel("insertion depth [mm]")
+        ax.set_ylabel("y_tip [mm]")
+        ax.set_title(f"({letter}) tendon 1 at {tension:g} N")
+        ax.grid(alpha=0.3)
+        ax.legend(title="tip mass", fontsize=8)
+    fig.suptitle("Tip height against insertion for several tip masses (paper Fig. 13)")
+    return _finish(fig, path)
+
+
+def plot_fig14(res, paper_points=None, path: str | Path | None = None):
+    """Paper Fig. 14: load capacity [g] against insertion [mm], one line per tension.
+
+    Args:
+        res: GridResult of ``paper.fig14_capacities`` (tension axis first, insertion second).
+        paper_points: optional (insertions [m], capacities [g] with one row per insertion and one
+            column per tension), drawn as crosses.
+    """
+    plt = _pyplot()
+    depths = np.asarray(res.axes["insertion"]) * 1e3
+    taus = np.asarray(res.axes["tensions"])[:, 0]
+    fig, ax = plt.subplots(figsize=(8.2, 4.8))
+    colours = plt.cm.viridis(np.linspace(0, 0.9, len(taus)))
+    for i, (tau, c) in enumerate(zip(taus, colours, strict=True)):
+        ax.plot(depths, res.mass[i] * 1e3, "o-", ms=3, color=c, label=f"{tau:g} N")
+        if paper_points is not None:
+            d, g = paper_points
+            ax.plot(np.asarray(d) * 1e3, np.asarray(g)[:, i], "x", color=c, ms=9, mew=2)
+    if paper_points is not None:
+        ax.plot([], [], "x", color="black", ms=9, mew=2, label="paper (Sec. V.A)")
+    ax.set_xlabel("insertion depth [mm]")
+    ax.set_ylabel("load capacity (tip reaches y = 0) [g]")
+    ax.set_title("Tip load capacity against insertion (paper Fig. 14)")
+    ax.grid(alpha=0.3)
+    ax.legend(title="tendon 1", fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    return _finish(fig, path)

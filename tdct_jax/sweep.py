@@ -84,7 +84,7 @@ def _columns(robot, act, grid, batch):
         return values, (next(iter(lengths.values())),), None
     shape = tuple(len(v) for v in values.values())
     index = np.meshgrid(*(np.arange(n) for n in shape), indexing="ij")
-    return {k: v[i.ravel()] for (k, v), i in zip(values.items(), index)}, shape, values
+    return {k: v[i.ravel()] for (k, v), i in zip(values.items(), index, strict=True)}, shape, values
 
 
 def configure(base, point):
@@ -264,12 +264,20 @@ class SweepResult:
         with path.open("w", newline="") as f:
             w = csv.writer(f)
             w.writerow(columns)
-            w.writerows(zip(*(c.tolist() for c in columns.values())))
+            w.writerows(zip(*(c.tolist() for c in columns.values()), strict=True))
         return path
 
 
 def _unit(name: str) -> str:
-    units = {"tensions": "N", "insertion": "m", "force": "N", "moment": "Nm", "tip_mass": "kg", "E_silicone": "Pa", "E_tube": "Pa"}
+    units = {
+        "tensions": "N",
+        "insertion": "m",
+        "force": "N",
+        "moment": "Nm",
+        "tip_mass": "kg",
+        "E_silicone": "Pa",
+        "E_tube": "Pa",
+    }
     if name in units:
         return units[name]
     return "kg_per_m3" if name.startswith("density") else "1" if name.startswith("nu") else "m"
