@@ -7,6 +7,12 @@ jax.config.update("jax_enable_x64", True)
 from .loads import STANDARD_GRAVITY as STANDARD_GRAVITY  # noqa: E402
 from .loads import Actuation as Actuation  # noqa: E402
 from .loads import TipLoad as TipLoad  # noqa: E402
+from .manipulation import Capacity as Capacity  # noqa: E402
+from .manipulation import Optimum as Optimum  # noqa: E402
+from .manipulation import capacity as capacity  # noqa: E402
+from .manipulation import insertion_optimum as insertion_optimum  # noqa: E402
+from .manipulation import load_capacity as load_capacity  # noqa: E402
+from .manipulation import optimal_insertion as optimal_insertion  # noqa: E402
 from .mechanics import Ellipsoid as Ellipsoid  # noqa: E402
 from .mechanics import compliance as compliance  # noqa: E402
 from .mechanics import compliance_ellipsoid as compliance_ellipsoid  # noqa: E402
@@ -18,5 +24,7 @@ from .shooting import ConvergenceError as ConvergenceError  # noqa: E402
 from .shooting import Solution as Solution  # noqa: E402
 from .shooting import SolverOptions as SolverOptions  # noqa: E402
 from .shooting import solve as solve  # noqa: E402
+from .sweep import SweepResult as SweepResult  # noqa: E402
+from .sweep import sweep as sweep  # noqa: E402
 
 __version__ = "0.1.0"

@@ -186,7 +186,6 @@ def plot_fig8b(res, path: str | Path | None = None):
     ax.set_xlabel("z_tip [mm]")
     ax.set_ylabel("y_tip [mm]")
     ax.set_title(f"Tip workspace: tendon 1 at {taus[0]:g}-{taus[-1]:g} N, insertion {depths[0]:g}-{depths[-1]:g} mm")
-    ax.set_aspect("equal", adjustable="datalim")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return _finish(fig, path)

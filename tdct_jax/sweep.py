@@ -123,13 +123,21 @@ def _run_chunk(base, points, kernel: Kernel):
 
     if kernel.mesh is None:
         return lanes(base, points)
-    return jax.shard_map(lanes, mesh=kernel.mesh, in_specs=(P(), P(AXIS)), out_specs=P(AXIS))(base, points)
+    sharded = jax.shard_map(lanes, mesh=kernel.mesh, in_specs=(P(), P(AXIS)), out_specs=P(AXIS), check_vma=False)
+    return sharded(base, points)
 
 
 def mesh_for(devices) -> Mesh | None:
     """A 1-D mesh over ``devices`` (default: all of ``jax.devices()``), or None for one device."""
     devices = jax.devices() if devices is None else list(devices)
     return Mesh(np.asarray(devices), (AXIS,)) if len(devices) > 1 else None
+
+
+def lanes_per_call(n: int, chunk_size: int, n_devices: int = 1) -> int:
+    """Configurations per compiled call for n points: ``chunk_size``, or the power of two at or
+    above n when that is smaller, rounded up to a multiple of the device count."""
+    chunk = min(chunk_size, 1 << max(n - 1, 0).bit_length())
+    return -(-chunk // n_devices) * n_devices
 
 
 def run_batched(kernel: Kernel, base, points: dict, *, chunk_size=DEFAULT_CHUNK, progress=True, desc="solving", per_point=1):
@@ -142,9 +150,7 @@ def run_batched(kernel: Kernel, base, points: dict, *, chunk_size=DEFAULT_CHUNK,
     if not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
         raise ValueError(f"chunk_size = {chunk_size!r} must be an integer >= 1")
     n = len(next(iter(points.values())))
-    n_dev = 1 if kernel.mesh is None else kernel.mesh.size
-    chunk = min(chunk_size, 1 << max(n - 1, 0).bit_length())
-    chunk = -(-chunk // n_dev) * n_dev
+    chunk = lanes_per_call(n, chunk_size, 1 if kernel.mesh is None else kernel.mesh.size)
     parts = []
     with tqdm(total=n * per_point, unit="solve", desc=desc, disable=not progress, dynamic_ncols=True) as bar:
         for start in range(0, n, chunk):

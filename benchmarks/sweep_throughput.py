@@ -1,0 +1,90 @@
+"""Sweep throughput: solves per second against batch size and chunk size, with and without warm starts.
+
+Run: python benchmarks/sweep_throughput.py [--quick]
+Writes benchmarks/results/sweep_throughput.json (and _quick.json with --quick). Each figure is
+the median of ``--repeats`` warm sweeps (compile excluded and reported separately); the envelope
+is random tensions (0-10 N on tendon 1 and 4), insertions (0-160 mm) and tip masses (0-50 g).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+from _common import write_result
+
+import tdct_jax as tdct
+from tdct_jax.sweep import DEFAULT_CHUNK, lanes_per_call
+
+
+def envelope(n: int, seed: int = 0) -> dict:
+    rng = np.random.default_rng(seed)
+    tensions = np.zeros((n, 4))
+    tensions[:, 0], tensions[:, 3] = rng.uniform(0, 10, n), rng.uniform(0, 10, n) * (rng.random(n) < 0.3)
+    return {"tensions": tensions, "insertion": rng.uniform(0, 0.16, n), "tip_mass": rng.uniform(0, 0.05, n)}
+
+
+def measure(run, repeats: int) -> dict:
+    """Compile (first call) and the median warm time of a sweep."""
+    t = time.perf_counter()
+    first = run()
+    compile_s = time.perf_counter() - t
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        res = run()
+        times.append(time.perf_counter() - t)
+    n = int(np.prod(res.shape))
+    median = float(np.median(times))
+    return dict(
+        points=n,
+        first_call_s=compile_s,
+        median_s=median,
+        solves_per_s=n / median,
+        failed=res.n_failed + first.n_failed,
+        newton_iterations=int(res.iterations.sum()),
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="batches up to 256, two chunk sizes, one repeat")
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    repeats = 1 if args.quick else args.repeats
+    robot = tdct.Robot()
+    batches = (1, 16, 256) if args.quick else (1, 10, 100, 1000, 10000)
+    chunks = (16, 64) if args.quick else (16, 64, 256, 1024)
+    chunk_batch = 256 if args.quick else 2048
+
+    rows = []
+    for b in batches:
+        rec = measure(lambda b=b: tdct.sweep(robot, batch=envelope(b), progress=False), repeats if b < 10000 else 1)
+        rows.append(dict(kind="batch", batch=b, chunk=lanes_per_call(b, DEFAULT_CHUNK), **rec))
+        print(rows[-1], flush=True)
+    for c in chunks:
+        rec = measure(lambda c=c: tdct.sweep(robot, batch=envelope(chunk_batch), chunk_size=c, progress=False), repeats)
+        rows.append(dict(kind="chunk", batch=chunk_batch, chunk=c, **rec))
+        print(rows[-1], flush=True)
+    # Warm starts: paths of increasing tension (the last grid axis), one per insertion.
+    n_paths, n_steps = (8, 6) if args.quick else (64, 16)
+    grid = {"insertion": np.linspace(0, 0.16, n_paths), "tensions": np.outer(np.linspace(0, 10, n_steps), [1.0, 0, 0, 0])}
+    for warm in (False, True):
+        rec = measure(lambda w=warm: tdct.sweep(robot, grid=grid, warm_start=w, progress=False), repeats)
+        chunk = n_paths if warm else lanes_per_call(n_paths * n_steps, DEFAULT_CHUNK)
+        rows.append(dict(kind="warm start" if warm else "cold start", batch=n_paths * n_steps, chunk=chunk, **rec))
+        print(rows[-1], flush=True)
+    name = "sweep_throughput_quick.json" if args.quick else "sweep_throughput.json"
+    write_result(Path(__file__).parent / "results" / name, steps=50, repeats=repeats, rows=rows)
+    print(f"{'kind':<11} {'batch':>6} {'chunk':>6} {'solves/s':>9} {'first call s':>12} {'iterations':>10} failed")
+    for r in rows:
+        print(
+            f"{r['kind']:<11} {r['batch']:>6} {r['chunk']:>6} {r['solves_per_s']:>9.1f} {r['first_call_s']:>12.1f}"
+            f" {r['newton_iterations']:>10} {r['failed']}"
+        )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,63 @@
+"""Load capacity and optimal insertion (Sec. V.A): defined by the solver's own tip height, checked there."""
+
+import dataclasses
+
+import jax
+import numpy as np
+import pytest
+
+import tdct_jax as tdct
+
+
+def tip_y(robot, act, mass):
+    return float(tdct.solve(robot, act, tdct.TipLoad.from_mass(mass), throw=True).tip_position[1])
+
+
+@pytest.fixture(scope="module")
+def capacities(robot):
+    grid = {"insertion": np.array([0.0, 0.07]), "tensions": np.array([[6.0, 0, 0, 0], [10.0, 0, 0, 0]])}
+    return tdct.load_capacity(robot, grid=grid, progress=False)
+
+
+def test_capacity_lifts_the_tip_exactly_to_the_base_height(robot, capacities):
+    res = capacities
+    assert res.shape == (2, 2) and res.converged.all() and res.reachable.all()
+    for i, d in enumerate((0.0, 0.07)):
+        for j, tau in enumerate((6.0, 10.0)):
+            act, m = tdct.Actuation((tau, 0, 0, 0), d), float(res.mass[i, j])
+            assert abs(tip_y(robot, act, m)) < 1e-9
+            assert tip_y(robot, act, 1.01 * m) < 0 < tip_y(robot, act, 0.99 * m)
+    # More tension lifts more; some tube lifts more than none (the paper's Fig. 14 trend).
+    assert np.all(res.mass[:, 1] > res.mass[:, 0]) and np.all(res.mass[1] > res.mass[0])
+
+
+def test_capacity_is_differentiable_in_robot_parameters(robot):
+    act = tdct.Actuation((8.0, 0, 0, 0), 0.05)
+
+    def mass(offset):
+        return tdct.capacity(dataclasses.replace(robot, tendon_offset=offset), act).mass
+
+    f = jax.jit(mass)
+    r = float(robot.tendon_offset)
+    exact = jax.jit(jax.grad(mass))(r)
+    h = 1e-6
+    central = (f(r + h) - f(r - h)) / (2 * h)
+    assert exact > 0
+    assert abs(exact - central) < 1e-6 * abs(central)
+
+
+def test_unreachable_height_gives_zero_capacity(robot):
+    res = tdct.load_capacity(robot, tdct.Actuation((2.0, 0, 0, 0), 0.0), height=0.1, progress=False)
+    assert res.shape == () and not res.reachable and res.mass == 0.0 and res.converged
+
+
+def test_optimal_insertion_is_a_stationary_maximum(robot):
+    act, load = tdct.Actuation((10.0, 0, 0, 0)), tdct.TipLoad.from_mass(0.05)
+    res = tdct.optimal_insertion(robot, act, load, n_curve=9, progress=False)
+    d = float(res.insertion)
+    assert res.converged and res.interior and 0.0 < d < float(robot.length)
+    J = tdct.kinematic_jacobian(robot, tdct.Actuation(act.tensions, d), load)
+    assert abs(J[1, -1]) < 1e-8  # d y_tip / d insertion, independently of the optimiser's own slope
+    y = lambda x: float(tdct.solve(robot, tdct.Actuation(act.tensions, x), load, throw=True).tip_position[1])  # noqa: E731
+    assert y(d - 1e-3) < y(d) > y(d + 1e-3)
+    assert y(d) >= res.curve_height.max()

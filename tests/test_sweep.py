@@ -1,0 +1,107 @@
+"""Batched sweeps: equal to one-by-one solves, warm starts, outputs, files, bad input, 2 devices."""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+import tdct_jax as tdct
+
+BASE = tdct.Actuation((6.0, 0.0, 0.0, 2.0), 0.0)
+GRID = {"insertion": np.array([0.0, 0.08, 0.16]), "tip_mass": np.array([0.0, 0.03])}
+
+
+@pytest.fixture(scope="module")
+def grid_sweep(robot):
+    return tdct.sweep(robot, BASE, grid=GRID, progress=False)
+
+
+def test_grid_sweep_equals_one_by_one_solves(robot, grid_sweep):
+    res = grid_sweep
+    assert res.shape == (3, 2) and res.n_failed == 0
+    for i, d in enumerate(GRID["insertion"]):
+        for j, m in enumerate(GRID["tip_mass"]):
+            single = tdct.solve(robot, tdct.Actuation(BASE.tensions, d), tdct.TipLoad.from_mass(m))
+            np.testing.assert_allclose(res.tip_position[i, j], single.tip_position, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(res.tip_angle[i, j], single.tip_angle, rtol=0, atol=1e-12)
+            assert res.iterations[i, j] == single.iterations
+    np.testing.assert_array_equal(res.inputs["insertion"][:, 1], GRID["insertion"])
+
+
+def test_batch_of_robot_fields_zips_points(robot):
+    batch = {"E_silicone": np.array([0.7e6, 1.1e6]), "insertion": np.array([0.02, 0.12])}
+    res = tdct.sweep(robot, BASE, batch=batch, shapes=True, compliance=True, progress=False)
+    assert res.shape == (2,) and res.position.shape == (2, 101, 3)
+    for k in range(2):
+        r = tdct.Robot(E_silicone=batch["E_silicone"][k])
+        act = tdct.Actuation(BASE.tensions, batch["insertion"][k])
+        np.testing.assert_allclose(res.position[k], tdct.solve(r, act).position, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(res.compliance[k], tdct.compliance(r, act), rtol=1e-9)
+
+
+def test_warm_started_path_matches_cold_solves(robot):
+    grid = {"insertion": np.array([0.0, 0.1]), "tensions": np.outer(np.linspace(0.0, 10.0, 6), [1.0, 0.0, 0.0, 0.0])}
+    cold = tdct.sweep(robot, grid=grid, progress=False)
+    warm = tdct.sweep(robot, grid=grid, warm_start=True, progress=False)
+    assert warm.n_failed == 0
+    np.testing.assert_allclose(warm.tip_position, cold.tip_position, rtol=0, atol=1e-9)
+    print(f"Newton iterations along the tension path: cold {cold.iterations.sum()}, warm {warm.iterations.sum()}")
+
+
+def test_results_save_to_npz_and_csv(grid_sweep, tmp_path):
+    res = grid_sweep
+    data = np.load(res.save_npz(tmp_path / "s.npz"))
+    np.testing.assert_array_equal(data["tip_position"], res.tip_position)
+    np.testing.assert_array_equal(data["axis_tip_mass"], GRID["tip_mass"])
+    lines = res.save_csv(tmp_path / "s.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    assert header[:2] == ["insertion_m", "tip_mass_kg"] and "tip_y_m" in header and len(lines) == 7
+    table = np.loadtxt(tmp_path / "s.csv", delimiter=",", skiprows=1)
+    np.testing.assert_allclose(table[:, header.index("tip_y_m")], res.tip_position[..., 1].ravel(), rtol=1e-15)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(grid={"stiffness": [1.0]}), "cannot sweep 'stiffness'"),
+        (dict(grid={"insertion": [0.0, 0.2]}), "insertion[1] = 0.2 is outside the allowed range [0, 0.16]"),
+        (dict(grid={"tensions": [[1.0, 0.0, 0.0]]}), "tensions: each point must have shape (4,)"),
+        (
+            dict(grid={"tensions": [[-1.0, 0.0, 0.0, 0.0]]}),
+            "tensions[0] = [-1.,  0.,  0.,  0.] is outside the allowed range [0, inf]",
+        ),
+        (dict(grid={"tip_mass": [np.nan]}), "tip_mass must be finite"),
+        (dict(grid={"E_silicone": [-1.0]}), "E_silicone = -1 is outside the allowed range (0, inf]"),
+        (dict(batch={"insertion": [0.0, 0.1], "tip_mass": [0.0]}), "same number of points"),
+        (dict(batch={"insertion": [0.0]}, warm_start=True), "warm_start=True needs grid="),
+        (dict(), "give exactly one of grid="),
+        (dict(grid={"insertion": [0.0]}, chunk_size=0), "chunk_size = 0"),
+    ],
+)
+def test_bad_sweep_input_names_the_field(robot, kwargs, message):
+    with pytest.raises(ValueError) as e:
+        tdct.sweep(robot, progress=False, **kwargs)
+    assert message in str(e.value)
+
+
+def test_sharded_sweep_on_two_devices_equals_one_device():
+    script = textwrap.dedent(
+        """
+        import json, jax, numpy as np, tdct_jax as tdct
+        assert jax.device_count() == 2, jax.devices()
+        grid = {"insertion": np.linspace(0.0, 0.16, 3), "tensions": np.outer([0.0, 4.0, 9.0], [1.0, 0.0, 0.0, 0.5])}
+        two = tdct.sweep(tdct.Robot(), grid=grid, progress=False)
+        one = tdct.sweep(tdct.Robot(), grid=grid, progress=False, devices=jax.devices()[:1])
+        print(json.dumps(dict(two=two.tip_position.tolist(), one=one.tip_position.tolist(), failed=two.n_failed)))
+        """
+    )
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu")
+    run = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    out = json.loads(run.stdout.strip().splitlines()[-1])
+    assert out["failed"] == 0
+    np.testing.assert_allclose(out["two"], out["one"], rtol=0, atol=1e-15)
