@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from pathlib import Path
 from time import perf_counter
 from typing import NamedTuple
 
@@ -20,7 +21,7 @@ from jax import lax
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .robot import Robot
 from .shooting import MAX_ITER, TOL, check_inputs, solve, solver_options
-from .sweep import DEFAULT_CHUNK, Kernel, _columns, configure, mesh_for, run_batched, sweep
+from .sweep import DEFAULT_CHUNK, Kernel, _columns, configure, mesh_for, run_batched, sweep, write_csv, write_npz
 
 HEIGHT_TOL = 1e-9
 """Default tolerance on the tip height [m] for the load capacity."""
@@ -75,14 +76,13 @@ def capacity(
         gravity: world gravity [m/s^2]; the tip mass weighs m * gravity.
         tol: tolerance on the tip height [m].
         max_iter: most Newton steps.
-        **solve_options: steps, transition, tendon_model, tol, max_iter for ``tdct.solve``
-            (prefix: ``solve_tol``, ``solve_max_iter``).
+        **solve_options: steps, transition, tendon_model, solve_tol, solve_max_iter for ``tdct.solve``.
 
     Returns:
         Capacity (mass [kg], reachable, converged, iterations).
     """
     gravity = jnp.asarray(gravity, dtype=float)
-    options = _solve_options(solve_options, gravity)
+    options = dict(_solve_options(solve_options), gravity=gravity)
     load = TipLoad()
 
     def f(m):
@@ -140,7 +140,7 @@ def insertion_optimum(
     second derivatives, superlinear convergence, never leaves the bracket. With lo == hi (an
     optimum at d = 0 or d = L) it evaluates that end.
     """
-    options = _solve_options(solve_options, jnp.asarray(gravity, dtype=float))
+    options = dict(_solve_options(solve_options), gravity=jnp.asarray(gravity, dtype=float))
     act = Actuation(act.tensions, jnp.zeros(()))
 
     def probe(d):
@@ -170,13 +170,13 @@ def insertion_optimum(
     return Optimum(d, y, g, converged, it)
 
 
-def _solve_options(solve_options: dict, gravity) -> dict:
+def _solve_options(solve_options: dict) -> dict:
+    """Keyword arguments for ``tdct.solve`` from steps, transition, tendon_model, solve_tol, solve_max_iter."""
     allowed = {"steps", "transition", "tendon_model", "solve_tol", "solve_max_iter"}
     unknown = set(solve_options) - allowed
     if unknown:
         raise TypeError(f"unknown solve option(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
-    options = {k.removeprefix("solve_"): v for k, v in solve_options.items()}
-    return dict(options, gravity=gravity)
+    return {k.removeprefix("solve_"): v for k, v in solve_options.items()}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -196,6 +196,16 @@ class GridResult:
     values: dict
     seconds: float
 
+    def save_npz(self, path) -> Path:
+        """Writes every array to a compressed .npz (inputs as ``input_<name>``, axes as ``axis_<name>``)."""
+        return write_npz(path, self.shape, self.axes, self.inputs, self.values)
+
+    def save_csv(self, path) -> Path:
+        """Writes one row per point: the inputs and the per-point values, SI units in the header."""
+        units = dict(mass="kg", insertion="m", height="m", slope="1")
+        per_point = {k: v for k, v in self.values.items() if np.shape(v) == self.shape}
+        return write_csv(path, self.shape, self.inputs, {f"{k}_{units[k]}" if k in units else k: v for k, v in per_point.items()})
+
     def __getattr__(self, name):
         values = self.__dict__.get("values", {})
         if name in values:
@@ -213,19 +223,19 @@ def _optimum_point(base, point, kernel: Kernel):
     return insertion_optimum(robot, act, load, point["lo"], point["hi"], gravity=base[3], **kernel.options)._asdict()
 
 
-def _batch(robot, act, load, grid, batch, steps, transition, tendon_model, solve_tol, solve_max_iter):
+def _batch(robot, act, load, grid, batch, solve_options):
+    """Defaults, checks and the points of a grid or batch (or the one configuration given)."""
     robot = Robot() if robot is None else robot
     act = Actuation(np.zeros(robot.n_tendons)) if act is None else act
     load = TipLoad() if load is None else load
-    solver_options(steps, transition, tendon_model, solve_tol, solve_max_iter)
+    options = dict(steps=50, transition="balanced", tendon_model="exact", tol=TOL, max_iter=MAX_ITER)
+    options.update(_solve_options(solve_options))
+    solver_options(**options)
     check_inputs(robot, act, load)
     if grid is None and batch is None:
         points, shape, axes = {"insertion": np.asarray(act.insertion).reshape(1)}, (), None
     else:
         points, shape, axes = _columns(robot, act, grid, batch)
-    options = dict(
-        steps=steps, transition=transition, tendon_model=tendon_model, solve_tol=solve_tol, solve_max_iter=solve_max_iter
-    )
     return robot, act, load, points, shape, axes, options
 
 
@@ -242,22 +252,18 @@ def load_capacity(
     progress: bool = True,
     devices=None,
     gravity=STANDARD_GRAVITY,
-    steps: int = 50,
-    transition: str = "balanced",
-    tendon_model: str = "exact",
-    solve_tol: float = TOL,
-    solve_max_iter: int = MAX_ITER,
+    **solve_options,
 ) -> GridResult:
     """``capacity`` at one configuration or over a ``grid`` / ``batch`` of inputs (see ``tdct.sweep``).
+
+    ``solve_options``: steps, transition, tendon_model, solve_tol, solve_max_iter.
 
     Returns:
         GridResult with values mass [kg], reachable, converged, iterations.
     """
-    robot, act, load, points, shape, axes, options = _batch(
-        robot, act, None, grid, batch, steps, transition, tendon_model, solve_tol, solve_max_iter
-    )
+    robot, act, load, points, shape, axes, _ = _batch(robot, act, None, grid, batch, solve_options)
     kernel = Kernel(
-        _capacity_point, tuple(dict(options, height=height, tol=tol, max_iter=max_iter).items()), mesh=mesh_for(devices)
+        _capacity_point, tuple(dict(solve_options, height=height, tol=tol, max_iter=max_iter).items()), mesh=mesh_for(devices)
     )
     start = perf_counter()
     g = jnp.asarray(gravity, dtype=float)
@@ -280,17 +286,14 @@ def optimal_insertion(
     progress: bool = True,
     devices=None,
     gravity=STANDARD_GRAVITY,
-    steps: int = 50,
-    transition: str = "balanced",
-    tendon_model: str = "exact",
-    solve_tol: float = TOL,
-    solve_max_iter: int = MAX_ITER,
+    **solve_options,
 ) -> GridResult:
     """Insertion depth that maximises the tip height y_tip (Fig. 13), with the curve y_tip(d).
 
     First the curve on ``n_curve`` depths from 0 to L (one sweep); its highest point brackets
     the optimum, which ``insertion_optimum`` refines to a zero of the exact slope. ``grid``
     (optional) varies the other inputs, e.g. {"tip_mass": ..., "tensions": ...}.
+    ``solve_options``: steps, transition, tendon_model, solve_tol, solve_max_iter.
 
     Returns:
         GridResult with values insertion [m], height [m], slope, converged, iterations,
@@ -300,9 +303,7 @@ def optimal_insertion(
         raise ValueError("optimal_insertion: the insertion is what is optimised; do not put it in grid")
     if not isinstance(n_curve, (int, np.integer)) or n_curve < 3:
         raise ValueError(f"n_curve = {n_curve!r} must be an integer >= 3")
-    robot, act, load, points, shape, axes, options = _batch(
-        robot, act, load, grid, None, steps, transition, tendon_model, solve_tol, solve_max_iter
-    )
+    robot, act, load, points, shape, axes, options = _batch(robot, act, load, grid, None, solve_options)
     start = perf_counter()
     depths = np.linspace(0.0, float(robot.length), n_curve)
     curve = sweep(
@@ -314,18 +315,14 @@ def optimal_insertion(
         progress=progress,
         devices=devices,
         gravity=gravity,
-        steps=steps,
-        transition=transition,
-        tendon_model=tendon_model,
-        tol=solve_tol,
-        max_iter=solve_max_iter,
+        **options,
     )
     heights = curve.tip_position[..., 1].reshape(-1, n_curve)
     k = np.argmax(heights, axis=1)
     interior = (k > 0) & (k < n_curve - 1)
     points["lo"] = np.where(interior, depths[np.maximum(k - 1, 0)], depths[k])
     points["hi"] = np.where(interior, depths[np.minimum(k + 1, n_curve - 1)], depths[k])
-    kernel = Kernel(_optimum_point, tuple(dict(options, tol=tol, max_iter=max_iter).items()), mesh=mesh_for(devices))
+    kernel = Kernel(_optimum_point, tuple(dict(solve_options, tol=tol, max_iter=max_iter).items()), mesh=mesh_for(devices))
     g = jnp.asarray(gravity, dtype=float)
     out = run_batched(kernel, (robot, act, load, g), points, chunk_size=chunk_size, progress=progress, desc="optimal insertion")
     values = {k: v.reshape(shape) for k, v in out.items()}

@@ -31,8 +31,10 @@ from .robot import SCALAR_FIELDS, Robot
 from .shooting import MAX_ITER, TOL, check_inputs, solve, solver_options
 from .so3 import tip_angle
 
-DEFAULT_CHUNK = 256
-"""Configurations per compiled call (bounds memory; a smaller sweep rounds up to a power of two)."""
+DEFAULT_CHUNK = 64
+"""Configurations per compiled call (bounds memory; a smaller sweep rounds up to a power of two).
+On the 2-core CPU 64 measured fastest (36 solves/s against 21-25 at 16, 256 and 1024;
+benchmarks/sweep_throughput.py)."""
 AXIS = "batch"
 """Name of the device-mesh axis the batch is sharded over."""
 
@@ -234,44 +236,46 @@ class SweepResult:
     def n_failed(self) -> int:
         return int(np.size(self.converged) - np.count_nonzero(self.converged))
 
-    def arrays(self) -> dict[str, np.ndarray]:
-        """Every array by name: inputs as ``input_<name>``, grid axes as ``axis_<name>``."""
-        out = {f"input_{k}": v for k, v in self.inputs.items()}
-        out.update({f"axis_{k}": v for k, v in (self.axes or {}).items()})
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if isinstance(v, np.ndarray):
-                out[f.name] = v
-        out["tip_angle"] = self.tip_angle
-        out["shape"] = np.asarray(self.shape)
-        return out
-
     def save_npz(self, path) -> Path:
-        """Writes every array (see ``arrays``) to a compressed .npz file."""
-        path = Path(path)
-        np.savez_compressed(path, **self.arrays())
-        return path
+        """Writes every array to a compressed .npz (inputs as ``input_<name>``, axes as ``axis_<name>``)."""
+        outputs = {
+            f.name: getattr(self, f.name) for f in dataclasses.fields(self) if isinstance(getattr(self, f.name), np.ndarray)
+        }
+        return write_npz(path, self.shape, self.axes, self.inputs, dict(outputs, tip_angle=self.tip_angle))
 
     def save_csv(self, path) -> Path:
         """Writes one row per point: the swept inputs and the tip outputs, SI units in the header."""
-        path = Path(path)
-        n = int(np.prod(self.shape))
-        columns: dict[str, np.ndarray] = {}
-        for k, v in self.inputs.items():
-            v = v.reshape(n, -1)
-            labels = [k] if v.shape[1] == 1 else [f"{k}_{i + 1}" for i in range(v.shape[1])]
-            columns.update({f"{label}_{_unit(k)}": v[:, i] for i, label in enumerate(labels)})
-        tip = self.tip_position.reshape(n, 3)
-        columns.update({f"tip_{c}_m": tip[:, i] for i, c in enumerate("xyz")})
-        columns["tip_angle_rad"] = self.tip_angle.reshape(n)
-        columns["converged"] = self.converged.reshape(n).astype(int)
-        columns["iterations"] = self.iterations.reshape(n)
-        columns["residual_norm"] = self.residual_norm.reshape(n)
-        with path.open("w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(columns)
-            w.writerows(zip(*(c.tolist() for c in columns.values()), strict=True))
-        return path
+        tip = self.tip_position
+        outputs = {f"tip_{c}_m": tip[..., i] for i, c in enumerate("xyz")}
+        outputs.update(tip_angle_rad=self.tip_angle, converged=self.converged, iterations=self.iterations)
+        return write_csv(path, self.shape, self.inputs, dict(outputs, residual_norm=self.residual_norm))
+
+
+def write_npz(path, shape, axes, inputs: dict, outputs: dict) -> Path:
+    """Saves a sweep-like result: outputs by name, inputs as ``input_<name>``, axes as ``axis_<name>``."""
+    path = Path(path)
+    arrays = {f"input_{k}": v for k, v in inputs.items()}
+    arrays.update({f"axis_{k}": v for k, v in (axes or {}).items()})
+    np.savez_compressed(path, shape=np.asarray(shape), **arrays, **outputs)
+    return path
+
+
+def write_csv(path, shape, inputs: dict, outputs: dict) -> Path:
+    """One row per point: input columns named with their SI unit, then the per-point ``outputs``
+    (arrays of the sweep's shape, named with their units by the caller)."""
+    path = Path(path)
+    n = int(np.prod(shape))
+    columns: dict[str, np.ndarray] = {}
+    for k, v in inputs.items():
+        v = v.reshape(n, -1)
+        labels = [k] if v.shape[1] == 1 else [f"{k}_{i + 1}" for i in range(v.shape[1])]
+        columns.update({f"{label}_{_unit(k)}": v[:, i] for i, label in enumerate(labels)})
+    columns.update({k: np.asarray(v).reshape(n) * 1 for k, v in outputs.items()})
+    with path.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(columns)
+        w.writerows(zip(*(c.tolist() for c in columns.values()), strict=True))
+    return path
 
 
 def _unit(name: str) -> str:

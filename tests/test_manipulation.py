@@ -61,3 +61,14 @@ def test_optimal_insertion_is_a_stationary_maximum(robot):
     y = lambda x: float(tdct.solve(robot, tdct.Actuation(act.tensions, x), load, throw=True).tip_position[1])  # noqa: E731
     assert y(d - 1e-3) < y(d) > y(d + 1e-3)
     assert y(d) >= res.curve_height.max()
+
+
+def test_capacity_grid_saves_to_csv_and_npz(capacities, tmp_path):
+    lines = capacities.save_csv(tmp_path / "c.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    assert header[:3] == ["insertion_m", "tensions_1_N", "tensions_2_N"] and "mass_kg" in header and len(lines) == 5
+    table = np.loadtxt(tmp_path / "c.csv", delimiter=",", skiprows=1)
+    np.testing.assert_allclose(table[:, header.index("mass_kg")], capacities.mass.ravel(), rtol=1e-15)
+    data = np.load(capacities.save_npz(tmp_path / "c.npz"))
+    np.testing.assert_array_equal(data["mass"], capacities.mass)
+    np.testing.assert_array_equal(data["axis_insertion"], [0.0, 0.07])
