@@ -60,9 +60,13 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _robot(args) -> Robot:
+    return Robot.from_toml(args.robot) if args.robot else Robot()
+
+
 def _inputs(args):
     """Robot, actuation, load and solve options from the shared flags, in SI units."""
-    robot = Robot.from_toml(args.robot) if args.robot else Robot()
+    robot = _robot(args)
     act = Actuation(tensions=args.tensions, insertion=args.insertion_mm * 1e-3)
     if args.tip_mass_g is not None:
         load = TipLoad(force=TipLoad.from_mass(args.tip_mass_g * 1e-3).force, moment=args.tip_moment)
@@ -134,7 +138,7 @@ def _solve_command(args) -> int:
 def _reproduce_command(args) -> int:
     from .reproduce import reproduce
 
-    robot = Robot.from_toml(args.robot) if args.robot else Robot()
+    robot = _robot(args)
     summary = reproduce(args.out, quick=args.quick, robot=robot, progress=not args.quiet)
     print((Path(args.out) / "summary.md").read_text())
     failed = [r for r in summary["headlines"] if "NOT converged" in r["note"]]

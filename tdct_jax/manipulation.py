@@ -20,8 +20,8 @@ from jax import lax
 
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .robot import Robot
-from .shooting import MAX_ITER, TOL, check_inputs, solve, solver_options
-from .sweep import DEFAULT_CHUNK, Kernel, _columns, configure, mesh_for, run_batched, sweep, write_csv, write_npz
+from .shooting import MAX_ITER, TOL, gravity_vector, solve, solver_options
+from .sweep import DEFAULT_CHUNK, Kernel, configure, mesh_for, prepare, run_batched, sweep, unflatten, write_csv, write_npz
 
 HEIGHT_TOL = 1e-9
 """Default tolerance on the tip height [m] for the load capacity."""
@@ -81,8 +81,7 @@ def capacity(
     Returns:
         Capacity (mass [kg], reachable, converged, iterations).
     """
-    gravity = jnp.asarray(gravity, dtype=float)
-    options = dict(_solve_options(solve_options), gravity=gravity)
+    options = dict(_solve_options(solve_options), gravity=gravity_vector(gravity))
     load = TipLoad()
 
     def f(m):
@@ -114,7 +113,7 @@ def capacity(
         m, y, _, _, _, _, it, y0, ok0 = lax.while_loop(not_done, body, init)
         reachable = ok0 & (y0 > 0)
         converged = ~reachable & ok0 | (jnp.abs(y) <= tol)
-        return jnp.where(reachable, m, 0.0), (reachable.astype(float), converged.astype(float), (it - 1).astype(float))
+        return m, (reachable.astype(float), converged.astype(float), (it - 1).astype(float))
 
     m, (reachable, converged, it) = lax.custom_root(f, jnp.zeros(()), search, lambda g, y: y / g(jnp.ones_like(y)), has_aux=True)
     reachable = reachable > 0.5
@@ -140,7 +139,7 @@ def insertion_optimum(
     second derivatives, superlinear convergence, never leaves the bracket. With lo == hi (an
     optimum at d = 0 or d = L) it evaluates that end.
     """
-    options = dict(_solve_options(solve_options), gravity=jnp.asarray(gravity, dtype=float))
+    options = dict(_solve_options(solve_options), gravity=gravity_vector(gravity))
     act = Actuation(act.tensions, jnp.zeros(()))
 
     def probe(d):
@@ -224,19 +223,11 @@ def _optimum_point(base, point, kernel: Kernel):
 
 
 def _batch(robot, act, load, grid, batch, solve_options):
-    """Defaults, checks and the points of a grid or batch (or the one configuration given)."""
-    robot = Robot() if robot is None else robot
-    act = Actuation(np.zeros(robot.n_tendons)) if act is None else act
-    load = TipLoad() if load is None else load
+    """``sweep.prepare`` for one configuration or a grid / batch, plus the checked solve options."""
     options = dict(steps=50, transition="balanced", tendon_model="exact", tol=TOL, max_iter=MAX_ITER)
     options.update(_solve_options(solve_options))
     solver_options(**options)
-    check_inputs(robot, act, load)
-    if grid is None and batch is None:
-        points, shape, axes = {"insertion": np.asarray(act.insertion).reshape(1)}, (), None
-    else:
-        points, shape, axes = _columns(robot, act, grid, batch)
-    return robot, act, load, points, shape, axes, options
+    return *prepare(robot, act, load, grid, batch, single=True), options
 
 
 def load_capacity(
@@ -266,11 +257,9 @@ def load_capacity(
         _capacity_point, tuple(dict(solve_options, height=height, tol=tol, max_iter=max_iter).items()), mesh=mesh_for(devices)
     )
     start = perf_counter()
-    g = jnp.asarray(gravity, dtype=float)
+    g = gravity_vector(gravity)
     out = run_batched(kernel, (robot, act, load, g), points, chunk_size=chunk_size, progress=progress, desc="load capacity")
-    values = {k: v.reshape(shape) for k, v in out.items()}
-    inputs = {k: v.reshape(shape + v.shape[1:]) for k, v in points.items()}
-    return GridResult(shape, axes, inputs, values, perf_counter() - start)
+    return GridResult(shape, axes, unflatten(points, shape), unflatten(out, shape), perf_counter() - start)
 
 
 def optimal_insertion(
@@ -323,10 +312,10 @@ def optimal_insertion(
     points["lo"] = np.where(interior, depths[np.maximum(k - 1, 0)], depths[k])
     points["hi"] = np.where(interior, depths[np.minimum(k + 1, n_curve - 1)], depths[k])
     kernel = Kernel(_optimum_point, tuple(dict(solve_options, tol=tol, max_iter=max_iter).items()), mesh=mesh_for(devices))
-    g = jnp.asarray(gravity, dtype=float)
+    g = gravity_vector(gravity)
     out = run_batched(kernel, (robot, act, load, g), points, chunk_size=chunk_size, progress=progress, desc="optimal insertion")
-    values = {k: v.reshape(shape) for k, v in out.items()}
+    values = unflatten(out, shape)
     values["converged"] = values["converged"] & curve.converged.reshape(*shape, n_curve).all(axis=-1)
     values.update(curve_insertion=depths, curve_height=heights.reshape(*shape, n_curve), interior=interior.reshape(shape))
-    inputs = {k: v.reshape(shape + v.shape[1:]) for k, v in points.items() if k not in ("lo", "hi")}
+    inputs = unflatten({k: v for k, v in points.items() if k not in ("lo", "hi")}, shape)
     return GridResult(shape, axes, inputs, values, perf_counter() - start)

@@ -162,23 +162,25 @@ def fit_load_capacities(
 
     def residual(log_values):
         mass, converged = capacities(log_values)
-        return (mass - target) / target, converged
+        r = (mass - target) / target
+        return r, (r, converged)
 
-    res_and_jac = jax.jit(lambda x: (residual(x), jax.jacfwd(lambda x: residual(x)[0])(x)))
+    jac_and_res = jax.jit(jax.jacfwd(residual, has_aux=True))
     x = np.log([float(getattr(robot, p)) for p in params])
-    converged = False
-    for it in range(1, max_iter + 1):
-        (r, ok), J = res_and_jac(x)
+    step, converged = None, False
+    for it in range(max_iter + 1):
+        J, (r, ok) = jac_and_res(x)
+        if step is not None and np.all(ok) and np.abs(step).max() < tol:
+            converged = True
+            break
+        if it == max_iter:
+            break
         step = np.linalg.lstsq(np.asarray(J), -np.asarray(r), rcond=None)[0]
         x = x + step
         if progress:
             progress(
-                f"  fit iteration {it}: rms misfit {100 * np.sqrt(np.mean(np.square(r))):.3f}%, step {np.abs(step).max():.2e}"
+                f"  fit iteration {it + 1}: rms misfit {100 * np.sqrt(np.mean(np.square(r))):.3f}%, step {np.abs(step).max():.2e}"
             )
-        if np.all(ok) and np.abs(step).max() < tol:
-            converged = True
-            break
-    (r, ok), _ = res_and_jac(x)
     mass = np.asarray(r) * target + target
     return Fit(
         values={p: float(np.exp(x[i])) for i, p in enumerate(params)},
@@ -186,5 +188,5 @@ def fit_load_capacities(
         paper_g=np.asarray(PAPER_CAPACITIES_G),
         residual_percent=100 * np.asarray(r).reshape(2, -1),
         iterations=it,
-        converged=converged and bool(np.all(ok)),
+        converged=converged,
     )

@@ -27,6 +27,11 @@ def _finish(fig, path):
     return fig
 
 
+def _tube_mask(s, insertion):
+    """True at the nodes inside the tube, [0, d]."""
+    return np.asarray(s) <= insertion + 1e-12 if insertion > 0 else np.zeros(np.shape(s), bool)
+
+
 def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, title: str | None = None):
     """Side view (world z-y plane) and 3D view of one solved shape; the tube part drawn thick.
 
@@ -38,7 +43,7 @@ def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, 
     """
     plt = _pyplot()
     p = np.asarray(sol.position) * 1e3
-    tube = np.asarray(sol.s) <= insertion + 1e-12 if insertion > 0 else np.zeros(len(p), bool)
+    tube = _tube_mask(sol.s, insertion)
     fig = plt.figure(figsize=(11, 4.6))
     ax = fig.add_subplot(1, 2, 1)
     ax.plot(p[:, 2], p[:, 1], color="tab:blue", lw=2, label="silicone only")
@@ -133,10 +138,6 @@ def plot_fig11(tensions, insertions, lam, path: str | Path | None = None):
     axes[0].legend(title="tendon 1 tension", fontsize=8)
     fig.suptitle("Eigenvalues of the tip compliance matrix (paper Fig. 11)")
     return _finish(fig, path)
-
-
-def _tube_mask(s, insertion):
-    return np.asarray(s) <= insertion + 1e-12 if insertion > 0 else np.zeros(np.shape(s), bool)
 
 
 def plot_fig8a(res, path: str | Path | None = None):

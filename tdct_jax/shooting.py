@@ -332,13 +332,18 @@ def solve(
     """
     opts = solver_options(steps, transition, tendon_model, tol, max_iter)
     load = TipLoad() if load is None else load
-    gravity = jnp.zeros(3) if gravity is None else as_array("gravity", gravity, (3,))
+    gravity = gravity_vector(gravity)
     guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
     check_inputs(robot, act, load)
     sol = _solve(robot, act, load, gravity, tol, max_iter, guess, opts)
     if throw:
         raise_if_failed(sol, tol, max_iter)
     return sol
+
+
+def gravity_vector(gravity):
+    """World gravity [m/s^2] as a (3,) array; None means none (the robot's weight switched off)."""
+    return jnp.zeros(3) if gravity is None else jnp.asarray(as_array("gravity", gravity, (3,)), dtype=float)
 
 
 def solver_options(steps, transition, tendon_model, tol, max_iter) -> SolverOptions:

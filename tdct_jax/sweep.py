@@ -28,7 +28,7 @@ from ._checks import as_array, check_range
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .mechanics import compliance_and_solution
 from .robot import SCALAR_FIELDS, Robot
-from .shooting import MAX_ITER, TOL, check_inputs, solve, solver_options
+from .shooting import MAX_ITER, TOL, check_inputs, gravity_vector, solve, solver_options
 from .so3 import tip_angle
 
 DEFAULT_CHUNK = 64
@@ -69,6 +69,26 @@ def _check_values(name: str, values, robot: Robot, act: Actuation) -> np.ndarray
         for x in (v.min(), v.max()):
             dataclasses.replace(robot, **{name: x})
     return v
+
+
+def prepare(robot, act, load, grid, batch, *, single=False):
+    """Defaults for the base configuration, its checks, and the points of ``grid`` or ``batch``.
+
+    Returns (robot, act, load, points with a leading axis, shape, grid axes or None). With
+    ``single`` and neither grid nor batch, the base configuration is the one point (shape ()).
+    """
+    robot = Robot() if robot is None else robot
+    act = Actuation(np.zeros(robot.n_tendons)) if act is None else act
+    load = TipLoad() if load is None else load
+    check_inputs(robot, act, load)
+    if single and grid is None and batch is None:
+        return robot, act, load, {"insertion": np.asarray(act.insertion).reshape(1)}, (), None
+    return robot, act, load, *_columns(robot, act, grid, batch)
+
+
+def unflatten(arrays: dict, shape: tuple, lead: int = 1) -> dict:
+    """Replaces the ``lead`` leading (point) axes of each array by the sweep's ``shape``."""
+    return {k: v.reshape(shape + v.shape[lead:]) for k, v in arrays.items()}
 
 
 def _columns(robot, act, grid, batch):
@@ -294,7 +314,7 @@ def _unit(name: str) -> str:
 
 
 def sweep(
-    robot: Robot,
+    robot: Robot | None = None,
     act: Actuation | None = None,
     load: TipLoad | None = None,
     *,
@@ -316,7 +336,7 @@ def sweep(
     """Solves many configurations at once: ``jax.vmap`` of ``tdct.solve`` in bounded chunks.
 
     Args:
-        robot, act, load: the base configuration (defaults: no tension, no tube, no tip load).
+        robot, act, load: the base configuration (defaults: Robot(), no tension, no tube, no tip load).
         grid: {name: values}: every combination of the axes, first axis slowest. Values have a
             leading axis of points: "tensions" (k, n_tendons) [N], "insertion" (k,) [m], "force"
             and "moment" (k, 3) [N], [N m], "tip_mass" (k,) [kg] (weight added to the force),
@@ -335,14 +355,10 @@ def sweep(
     Returns:
         SweepResult; check ``converged`` (or ``n_failed``).
     """
-    robot = Robot() if robot is None else robot
-    act = Actuation(np.zeros(robot.n_tendons)) if act is None else act
-    load = TipLoad() if load is None else load
-    points, shape, axes = _columns(robot, act, grid, batch)
     solver_options(steps, transition, tendon_model, tol, max_iter)
-    check_inputs(robot, act, load)
+    robot, act, load, points, shape, axes = prepare(robot, act, load, grid, batch)
     options = (("steps", steps), ("transition", transition), ("tendon_model", tendon_model), ("tol", tol), ("max_iter", max_iter))
-    g = jnp.zeros(3) if gravity is None else as_array("gravity", gravity, (3,))
+    g = gravity_vector(gravity)
     function, per_point = _solve_point, 1
     if warm_start:
         if grid is None:
@@ -354,6 +370,7 @@ def sweep(
     start = perf_counter()
     out = run_batched(kernel, (robot, act, load, g), points, chunk_size=chunk_size, progress=progress, per_point=per_point)
     seconds = perf_counter() - start
-    reshape = {k: v.reshape(shape + v.shape[1 + warm_start :]) for k, v in out.items()}
-    inputs = {k: v.reshape(shape + v.shape[1 + warm_start :]) for k, v in points.items()}
-    return SweepResult(shape=shape, axes=axes, inputs=inputs, seconds=seconds, **reshape)
+    lead = 1 + warm_start
+    return SweepResult(
+        shape=shape, axes=axes, inputs=unflatten(points, shape, lead), seconds=seconds, **unflatten(out, shape, lead)
+    )
