@@ -4,6 +4,14 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
+from .calibrate import Calibration as Calibration  # noqa: E402
+from .calibrate import calibrate as calibrate  # noqa: E402
+from .calibrate import solve_experiments as solve_experiments  # noqa: E402
+from .calibrate import synthesize as synthesize  # noqa: E402
+from .data import Experiment as Experiment  # noqa: E402
+from .data import read_experiment as read_experiment  # noqa: E402
+from .data import read_experiments as read_experiments  # noqa: E402
+from .data import write_experiment as write_experiment  # noqa: E402
 from .loads import STANDARD_GRAVITY as STANDARD_GRAVITY  # noqa: E402
 from .loads import Actuation as Actuation  # noqa: E402
 from .loads import TipLoad as TipLoad  # noqa: E402
@@ -19,6 +27,9 @@ from .mechanics import compliance_ellipsoid as compliance_ellipsoid  # noqa: E40
 from .mechanics import finite_difference_compliance as finite_difference_compliance  # noqa: E402
 from .mechanics import kinematic_jacobian as kinematic_jacobian  # noqa: E402
 from .mechanics import parameter_jacobian as parameter_jacobian  # noqa: E402
+from .mechanics import positions_at as positions_at  # noqa: E402
+from .mechanics import rmse as rmse  # noqa: E402
+from .mechanics import tip_error as tip_error  # noqa: E402
 from .robot import Robot as Robot  # noqa: E402
 from .shooting import ConvergenceError as ConvergenceError  # noqa: E402
 from .shooting import Solution as Solution  # noqa: E402

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -11,7 +12,7 @@ import numpy as np
 
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .mechanics import compliance, compliance_ellipsoid
-from .robot import Robot
+from .robot import SCALAR_FIELDS, Robot
 from .shooting import MAX_ITER, TOL, ConvergenceError, raise_if_failed, solve
 
 
@@ -28,8 +29,31 @@ def _floats(n: int | None = None):
     return parse
 
 
+def _assignment(text: str):
+    name, sep, value = text.partition("=")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"expected FIELD=VALUE (a Robot field in SI units), got {text!r}")
+    try:
+        return name.strip(), float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{name.strip()}: expected a number, got {value!r}") from None
+
+
 def _parser() -> argparse.ArgumentParser:
-    common = argparse.ArgumentParser(add_help=False)
+    described = argparse.ArgumentParser(add_help=False)
+    described.add_argument("--robot", metavar="robot.toml", help="TOML file of Robot fields in SI units")
+    described.add_argument(
+        "--set",
+        type=_assignment,
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="override one Robot field, SI units (e.g. E_silicone=1.1e6); repeatable, applied after --robot",
+    )
+    described.add_argument("--steps", type=int, default=50, help="RK4 steps per segment (default 50)")
+    described.add_argument("--no-gravity", action="store_true", help="ignore the robot's own weight")
+
+    common = argparse.ArgumentParser(add_help=False, parents=[described])
     common.add_argument(
         "--tensions", type=_floats(), default=(0.0, 0.0, 0.0, 0.0), help="tendon tensions in N, tendon 1 first (default 0,0,0,0)"
     )
@@ -40,9 +64,6 @@ def _parser() -> argparse.ArgumentParser:
     common.add_argument(
         "--tip-moment", type=_floats(3), default=(0.0, 0.0, 0.0), metavar="MX,MY,MZ", help="tip moment in N m, world frame"
     )
-    common.add_argument("--no-gravity", action="store_true", help="ignore the robot's own weight")
-    common.add_argument("--robot", metavar="robot.toml", help="TOML file of Robot fields in SI units")
-    common.add_argument("--steps", type=int, default=50, help="RK4 steps per segment (default 50)")
     common.add_argument("--json", action="store_true", help="print one JSON object instead of text")
 
     parser = argparse.ArgumentParser(prog="tdct", description="Statics of the TDCT soft robot (tdct_jax).")
@@ -57,11 +78,41 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--quick", action="store_true", help="coarse grids and no parameter fit (about a minute)")
     r.add_argument("--robot", metavar="robot.toml", help="TOML file of Robot fields in SI units")
     r.add_argument("--quiet", action="store_true", help="no progress output")
+    y = verbs.add_parser("synth", parents=[described], help="write synthetic FBG-like shape files from the model")
+    y.add_argument("--out", required=True, metavar="DIR", help="folder for the shape files (one CSV per experiment)")
+    which = y.add_mutually_exclusive_group(required=True)
+    which.add_argument(
+        "--preset", choices=["paper"], help="paper: Sec. III.B's protocol, tendon 1 at 2, 4, 6, 8, 10 N, no tube, no load"
+    )
+    which.add_argument(
+        "--tensions", type=_floats(), action="append", help="tendon tensions in N, tendon 1 first; repeat for more experiments"
+    )
+    y.add_argument("--insertion-mm", type=float, default=0.0, help="tube insertion depth in mm for every experiment (default 0)")
+    y.add_argument("--tip-mass-g", type=float, default=0.0, help="tip mass in grams for every experiment (default 0)")
+    y.add_argument("--noise-mm", type=float, default=0.1, help="Gaussian noise per coordinate in mm (default 0.1)")
+    y.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    y.add_argument("--points", type=int, default=33, help="points per shape, base to tip (default 33)")
+    k = verbs.add_parser("calibrate", parents=[described], help="fit Robot fields to measured shape files (Sec. III.B)")
+    k.add_argument("files", nargs="+", metavar="FILE", help="shape files (CSV, see tdct_jax.data) or folders of them")
+    k.add_argument("--params", default="E_silicone", help="comma-separated Robot fields to fit (default E_silicone)")
+    k.add_argument("--max-iter", type=int, default=30, help="most Levenberg-Marquardt steps (default 30)")
+    k.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+    k.add_argument("--plot", metavar="fit.png", help="save model over measured shapes (side view and 3D)")
+    k.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
 
 
 def _robot(args) -> Robot:
-    return Robot.from_toml(args.robot) if args.robot else Robot()
+    robot = Robot.from_toml(args.robot) if args.robot else Robot()
+    fields = dict(getattr(args, "set", []))
+    unknown = sorted(set(fields) - set(SCALAR_FIELDS))
+    if unknown:
+        raise ValueError(f"--set: unknown Robot field(s) {unknown}; allowed: {list(SCALAR_FIELDS)}")
+    return dataclasses.replace(robot, **fields)
+
+
+def _gravity(args):
+    return None if args.no_gravity else STANDARD_GRAVITY
 
 
 def _inputs(args):
@@ -72,7 +123,7 @@ def _inputs(args):
         load = TipLoad(force=TipLoad.from_mass(args.tip_mass_g * 1e-3).force, moment=args.tip_moment)
     else:
         load = TipLoad(force=args.tip_force or (0.0, 0.0, 0.0), moment=args.tip_moment)
-    options = dict(steps=args.steps, gravity=None if args.no_gravity else STANDARD_GRAVITY)
+    options = dict(steps=args.steps, gravity=_gravity(args))
     return robot, act, load, options
 
 
@@ -148,10 +199,63 @@ def _reproduce_command(args) -> int:
     return 0
 
 
+def _synth_command(args) -> int:
+    from . import paper
+    from .calibrate import synthesize
+    from .data import write_experiment
+
+    robot = _robot(args)
+    if args.preset == "paper":
+        acts = paper.calibration_conditions(robot)
+    else:
+        acts = [Actuation(t, args.insertion_mm * 1e-3) for t in args.tensions]
+    experiments = synthesize(
+        robot,
+        acts,
+        tip_masses=[args.tip_mass_g * 1e-3] * len(acts),
+        n_points=args.points,
+        noise=args.noise_mm * 1e-3,
+        seed=args.seed,
+        gravity=_gravity(args),
+        steps=args.steps,
+    )
+    for e in experiments:
+        print(write_experiment(Path(args.out) / f"{e.name}.csv", e))
+    return 0
+
+
+def _calibrate_command(args) -> int:
+    from .calibrate import calibrate, solve_experiments
+    from .data import read_experiments
+
+    robot = _robot(args)
+    experiments = read_experiments(args.files, robot)
+    params = tuple(p.strip() for p in args.params.split(",") if p.strip())
+    options = dict(gravity=_gravity(args), steps=args.steps)
+    fit = calibrate(robot, experiments, params, max_iter=args.max_iter, progress=not args.quiet, **options)
+    print(json.dumps(fit.to_dict()) if args.json else fit.summary())
+    if args.plot:
+        from .plotting import plot_calibration
+
+        fitted = ", ".join(f"{p} = {fit.values[p]:.4g}" for p in params)
+        plot_calibration(
+            solve_experiments(fit.robot, experiments, **options), experiments, args.plot, title=f"calibrated: {fitted}"
+        )
+    if not fit.converged:
+        raise ConvergenceError(f"calibration did not converge: {fit.message}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code (0 ok, 1 not converged, 2 bad input)."""
     args = _parser().parse_args(argv)
-    command = {"solve": _solve_command, "compliance": _compliance_command, "reproduce": _reproduce_command}[args.verb]
+    command = {
+        "solve": _solve_command,
+        "compliance": _compliance_command,
+        "reproduce": _reproduce_command,
+        "synth": _synth_command,
+        "calibrate": _calibrate_command,
+    }[args.verb]
     try:
         return command(args)
     except ValueError as e:

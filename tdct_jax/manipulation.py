@@ -20,7 +20,7 @@ from jax import lax
 
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .robot import Robot
-from .shooting import MAX_ITER, TOL, gravity_vector, solve, solver_options
+from .shooting import MAX_ITER, TOL, gravity_vector, nested_solve_options, solve, solver_options
 from .sweep import DEFAULT_CHUNK, Kernel, configure, mesh_for, prepare, run_batched, sweep, unflatten, write_csv, write_npz
 
 HEIGHT_TOL = 1e-9
@@ -81,7 +81,7 @@ def capacity(
     Returns:
         Capacity (mass [kg], reachable, converged, iterations).
     """
-    options = dict(_solve_options(solve_options), gravity=gravity_vector(gravity))
+    options = dict(nested_solve_options(solve_options), gravity=gravity_vector(gravity))
     load = TipLoad()
 
     def f(m):
@@ -139,7 +139,7 @@ def insertion_optimum(
     second derivatives, superlinear convergence, never leaves the bracket. With lo == hi (an
     optimum at d = 0 or d = L) it evaluates that end.
     """
-    options = dict(_solve_options(solve_options), gravity=gravity_vector(gravity))
+    options = dict(nested_solve_options(solve_options), gravity=gravity_vector(gravity))
     act = Actuation(act.tensions, jnp.zeros(()))
 
     def probe(d):
@@ -167,15 +167,6 @@ def insertion_optimum(
     converged = ok & ((hi <= lo) | (jnp.abs(g) <= tol))
     it = it - 2
     return Optimum(d, y, g, converged, it)
-
-
-def _solve_options(solve_options: dict) -> dict:
-    """Keyword arguments for ``tdct.solve`` from steps, transition, tendon_model, solve_tol, solve_max_iter."""
-    allowed = {"steps", "transition", "tendon_model", "solve_tol", "solve_max_iter"}
-    unknown = set(solve_options) - allowed
-    if unknown:
-        raise TypeError(f"unknown solve option(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
-    return {k.removeprefix("solve_"): v for k, v in solve_options.items()}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -225,7 +216,7 @@ def _optimum_point(base, point, kernel: Kernel):
 def _batch(robot, act, load, grid, batch, solve_options):
     """``sweep.prepare`` for one configuration or a grid / batch, plus the checked solve options."""
     options = dict(steps=50, transition="balanced", tendon_model="exact", tol=TOL, max_iter=MAX_ITER)
-    options.update(_solve_options(solve_options))
+    options.update(nested_solve_options(solve_options))
     solver_options(**options)
     return *prepare(robot, act, load, grid, batch, single=True), options
 

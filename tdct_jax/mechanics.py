@@ -1,4 +1,5 @@
-"""Derived mechanics: exact tip compliance (eq. 41), compliance ellipsoid (eq. 43), Jacobians.
+"""Derived mechanics: exact tip compliance (eq. 41), compliance ellipsoid (eq. 43), Jacobians,
+and the shape error against a measured shape (RMSE, eq. 39, and tip error).
 
 Every derivative here is forward-mode autodiff through the converged shooting solution: JAX
 differentiates the root implicitly (one 6x6 shooting Jacobian, no extra Newton solves, no
@@ -144,3 +145,45 @@ def compliance_ellipsoid(CM) -> Ellipsoid:
     lam, mu = jnp.linalg.eigh((CM + jnp.swapaxes(CM, -1, -2)) / 2)
     U, S, _ = jnp.linalg.svd(CM)
     return Ellipsoid(lam, mu, S, U)
+
+
+def positions_at(sol, s):
+    """The model's positions p(s) [m] at arc lengths ``s`` [m], shape s.shape + (3,).
+
+    Cubic Hermite interpolation between RK4 nodes with the exact tangents p' = R v, so the
+    interpolation error is O(h^4) like RK4's own. Arc lengths outside [0, L] are clamped to the
+    ends. Differentiable in the solution (for calibration); not in ``s``.
+    """
+    nodes = sol.s
+    s = jnp.clip(jnp.asarray(s, dtype=nodes.dtype), nodes[0], nodes[-1])
+    k = jnp.clip(jnp.searchsorted(nodes, s, side="right") - 1, 0, nodes.size - 2)
+    h = nodes[k + 1] - nodes[k]
+    t = jnp.where(h > 0, (s - nodes[k]) / jnp.where(h > 0, h, 1.0), 0.0)[..., None]
+    tangent = jnp.einsum("nij,nj->ni", sol.rotation, sol.strain)
+    p0, p1, m0, m1 = sol.position[k], sol.position[k + 1], tangent[k], tangent[k + 1]
+    h = h[..., None]
+    return (2 * t**3 - 3 * t**2 + 1) * p0 + (t**3 - 2 * t**2 + t) * h * m0 + (-2 * t**3 + 3 * t**2) * p1 + (t**3 - t**2) * h * m1
+
+
+def shape_deviation(sol, measured):
+    """Model minus measured position at each measured point [m], (n, 3); ``measured`` is an
+    Experiment (or anything with ``s`` [m] and ``position`` [m])."""
+    return positions_at(sol, measured.s) - measured.position
+
+
+def rmse(sol, measured):
+    """Root-mean-square distance between model and measured shape (eq. 39) [m].
+
+    Points are weighted by ``measured.weight`` (padding in a stacked batch has weight 0).
+    Divide by ``robot.length`` for the paper's "% of total length".
+    """
+    w = measured.weight
+    d2 = jnp.sum(shape_deviation(sol, measured) ** 2, axis=-1)
+    return jnp.sqrt(jnp.sum(w * d2) / jnp.sum(w))
+
+
+def tip_error(sol, measured):
+    """Distance between model and measured position at the last measured point [m]."""
+    w = measured.weight
+    last = w.size - 1 - jnp.argmax(w[::-1] > 0)
+    return jnp.linalg.norm(shape_deviation(sol, measured)[last])

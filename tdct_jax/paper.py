@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .calibrate import levenberg_marquardt
 from .loads import Actuation, TipLoad
 from .manipulation import capacity, load_capacity, optimal_insertion
 from .mechanics import compliance, compliance_ellipsoid
@@ -48,6 +49,8 @@ TABLE3_INSERTIONS = tuple(MM * d for d in (0, 40, 80, 120))
 TABLE3_MASSES = tuple(G * m for m in (0, 20, 50))
 PAPER_BENDING_RANGE_DEG = (-57.1, 61.4)
 """Sec. III.B: tip bending angles over the Table III conditions."""
+CALIBRATION_TENSIONS = (2.0, 4.0, 6.0, 8.0, 10.0)
+"""Sec. III.B calibrates on "five distinct tendon forces" on one tendon without listing them: ours."""
 
 
 def tendon1(robot: Robot, tensions) -> np.ndarray:
@@ -145,7 +148,7 @@ class Fit(NamedTuple):
 def fit_load_capacities(
     robot: Robot, params=("tendon_offset",), *, max_iter: int = 12, tol: float = 1e-8, progress=print, **solve_options
 ) -> Fit:
-    """Fits Robot fields to the ten load capacities of Sec. V.A by Gauss-Newton in log space.
+    """Fits Robot fields to the ten load capacities of Sec. V.A by Levenberg-Marquardt in log space.
 
     Residuals are relative misfits (model - paper) / paper; the Jacobian is exact (jacfwd through
     the implicitly differentiated capacity root, vmapped over the ten conditions).
@@ -155,38 +158,34 @@ def fit_load_capacities(
     depths = jnp.repeat(jnp.asarray(CAPACITY_INSERTIONS), len(CAPACITY_TENSIONS))
     target = G * np.asarray(PAPER_CAPACITIES_G).ravel()
 
-    def capacities(log_values):
+    def residual(log_values):
         r = dataclasses.replace(robot, **{p: jnp.exp(log_values[i]) for i, p in enumerate(params)})
         c = jax.vmap(lambda t, d: capacity(r, Actuation(t, d), **solve_options))(tensions, depths)
-        return c.mass, c.converged
-
-    def residual(log_values):
-        mass, converged = capacities(log_values)
-        r = (mass - target) / target
-        return r, (r, converged)
+        misfit = (c.mass - target) / target
+        return misfit, (misfit, c.converged)
 
     jac_and_res = jax.jit(jax.jacfwd(residual, has_aux=True))
-    x = np.log([float(getattr(robot, p)) for p in params])
-    step, converged = None, False
-    for it in range(max_iter + 1):
+
+    def evaluate(x):
         J, (r, ok) = jac_and_res(x)
-        if step is not None and np.all(ok) and np.abs(step).max() < tol:
-            converged = True
-            break
-        if it == max_iter:
-            break
-        step = np.linalg.lstsq(np.asarray(J), -np.asarray(r), rcond=None)[0]
-        x = x + step
-        if progress:
-            progress(
-                f"  fit iteration {it + 1}: rms misfit {100 * np.sqrt(np.mean(np.square(r))):.3f}%, step {np.abs(step).max():.2e}"
-            )
-    mass = np.asarray(r) * target + target
+        return np.asarray(r), np.asarray(J), bool(np.all(ok)), None
+
+    def report(it, r, step):
+        progress(f"  fit iteration {it}: rms misfit {100 * np.sqrt(np.mean(np.square(r))):.3f}%, step {np.abs(step).max():.2e}")
+
+    x0 = np.log([float(getattr(robot, p)) for p in params])
+    fit = levenberg_marquardt(evaluate, x0, max_iter=max_iter, xtol=tol, callback=report if progress else None)
+    mass = fit.residual * target + target
     return Fit(
-        values={p: float(np.exp(x[i])) for i, p in enumerate(params)},
+        values={p: float(np.exp(fit.x[i])) for i, p in enumerate(params)},
         capacities_g=(mass / G).reshape(2, -1),
         paper_g=np.asarray(PAPER_CAPACITIES_G),
-        residual_percent=100 * np.asarray(r).reshape(2, -1),
-        iterations=it,
-        converged=converged,
+        residual_percent=100 * fit.residual.reshape(2, -1),
+        iterations=fit.iterations,
+        converged=fit.converged,
     )
+
+
+def calibration_conditions(robot: Robot, tensions=CALIBRATION_TENSIONS) -> list[Actuation]:
+    """Sec. III.B's calibration protocol: tendon 1 alone at five tensions, no tube, no tip load."""
+    return [Actuation(t, 0.0) for t in tendon1(robot, tensions)]

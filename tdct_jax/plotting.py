@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from .shooting import Solution
@@ -62,6 +63,15 @@ def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, 
     if tube.any():
         ax3.plot(p[tube, 0], p[tube, 2], p[tube, 1], color="black", lw=4)
     ax3.scatter(*p[-1, [0, 2, 1]], color="tab:red")
+    _equal_3d(ax3, p)
+    ax3.set_title("3D (gravity along -y)")
+    if title:
+        fig.suptitle(title)
+    return _finish(fig, path)
+
+
+def _equal_3d(ax3, p):
+    """Labels a 3D axes drawn as (x, z, y) [mm] and gives it equal spans around the points (k, 3)."""
     ax3.set_xlabel("x [mm]")
     ax3.set_ylabel("z [mm]")
     ax3.set_zlabel("y [mm]")
@@ -70,7 +80,48 @@ def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, 
     ax3.set_xlim(mid[0] - span, mid[0] + span)
     ax3.set_ylim(mid[2] - span, mid[2] + span)
     ax3.set_zlim(mid[1] - span, mid[1] + span)
-    ax3.set_title("3D (gravity along -y)")
+
+
+def plot_calibration(solutions: Solution, experiments, path: str | Path | None = None, title: str | None = None):
+    """Model shapes (lines) over measured shapes (markers), like the paper's Figs. 6 and 7.
+
+    Left: side view in the world z-y plane (Fig. 6); right: 3D (Fig. 7). The legend gives each
+    experiment's RMSE (eq. 39) and tip error.
+
+    Args:
+        solutions: the model's Solutions, batched with a leading axis (one per experiment).
+        experiments: the measured shapes (a list of ``data.Experiment``), in the same order.
+        path: where to save a PNG; the figure is returned either way.
+        title: figure title.
+    """
+    from .mechanics import rmse, tip_error
+
+    plt = _pyplot()
+    fig = plt.figure(figsize=(12, 5))
+    ax = fig.add_subplot(1, 2, 1)
+    ax3 = fig.add_subplot(1, 2, 2, projection="3d")
+    colors = plt.cm.viridis(np.linspace(0.0, 0.9, len(experiments)))
+    every = []
+    for i, (e, c) in enumerate(zip(experiments, colors, strict=True)):
+        sol = jax.tree.map(lambda a, i=i: a[i], solutions)
+        p, q = np.asarray(sol.position) * 1e3, np.asarray(e.position) * 1e3
+        label = f"{e.name}: RMSE {float(rmse(sol, e)) * 1e3:.2f} mm, tip {float(tip_error(sol, e)) * 1e3:.2f} mm"
+        ax.plot(p[:, 2], p[:, 1], color=c, lw=1.8, label=label)
+        ax.plot(q[:, 2], q[:, 1], "o", mfc="none", color=c, ms=4)
+        ax3.plot(p[:, 0], p[:, 2], p[:, 1], color=c, lw=1.8)
+        ax3.scatter(q[:, 0], q[:, 2], q[:, 1], color=c, s=8)
+        every += [p, q]
+    ax.plot([], [], "o", mfc="none", color="0.3", ms=4, label="measured")
+    ax.plot([], [], color="0.3", lw=1.8, label="model")
+    ax.axhline(0, color="0.8", lw=0.8, zorder=0)
+    ax.set_xlabel("z [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_title("side view (paper Fig. 6)")
+    ax.legend(loc="best", fontsize=7)
+    ax.grid(alpha=0.3)
+    _equal_3d(ax3, np.concatenate(every))
+    ax3.set_title("3D (paper Fig. 7)")
     if title:
         fig.suptitle(title)
     return _finish(fig, path)

@@ -354,6 +354,16 @@ def solver_options(steps, transition, tendon_model, tol, max_iter) -> SolverOpti
     return SolverOptions(steps=steps, transition=transition, tendon_model=tendon_model)
 
 
+def nested_solve_options(solve_options: dict) -> dict:
+    """Keyword arguments for ``solve`` from steps, transition, tendon_model, solve_tol and
+    solve_max_iter: the options of a routine that runs solves inside an iteration of its own."""
+    allowed = {"steps", "transition", "tendon_model", "solve_tol", "solve_max_iter"}
+    unknown = set(solve_options) - allowed
+    if unknown:
+        raise TypeError(f"unknown solve option(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+    return {k.removeprefix("solve_"): v for k, v in solve_options.items()}
+
+
 def check_inputs(robot: Robot, act: Actuation, load: TipLoad) -> None:
     """Cross-checks between robot and actuation that the pytrees cannot make alone."""
     for name, obj, cls in (("robot", robot, Robot), ("act", act, Actuation), ("load", load, TipLoad)):

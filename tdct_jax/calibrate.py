@@ -1,0 +1,389 @@
+"""Calibration of Robot fields from measured shapes (paper Sec. III.B), and synthetic shape data.
+
+The paper fits the silicone's Young's modulus by minimising the error between five measured shapes
+and the model. Here any subset of the scalar Robot fields is fitted to any number of experiments
+by Levenberg-Marquardt on the point-wise shape residuals, with the Jacobian exact (forward-mode
+autodiff through the implicitly differentiated shooting solution, vmapped over experiments).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from functools import partial
+from time import perf_counter
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from tqdm.auto import tqdm
+
+from .data import Experiment, stack
+from .loads import STANDARD_GRAVITY, Actuation, TipLoad
+from .mechanics import rmse, shape_deviation, tip_error
+from .robot import SCALAR_FIELDS, Robot
+from .shooting import MAX_ITER, TOL, ConvergenceError, check_inputs, gravity_vector, nested_solve_options, solve, solver_options
+
+LINEAR_FIELDS = ("nu_silicone", "nu_tube")
+"""Fields fitted as they are (they may be zero or negative); every other field is fitted in log space."""
+FBG_POINTS = 33
+"""Points per synthetic shape: every 5 mm along the paper's 160 mm robot."""
+
+
+class LeastSquares(NamedTuple):
+    """Outcome of ``levenberg_marquardt``: the last accepted point and what was evaluated there."""
+
+    x: np.ndarray
+    residual: np.ndarray
+    jacobian: np.ndarray
+    aux: object
+    iterations: int
+    converged: bool
+    message: str
+
+
+def levenberg_marquardt(
+    evaluate: Callable, x0, *, max_iter: int = 30, xtol: float = 1e-8, callback: Callable | None = None
+) -> LeastSquares:
+    """Minimises |r(x)|^2 by Levenberg-Marquardt with Marquardt's diagonal scaling.
+
+    Args:
+        evaluate: x -> (r (m,), J (m, p), ok, aux) in numpy; ``ok`` says the model converged.
+        x0: starting point, (p,).
+        max_iter: most trial steps.
+        xtol: converged when the undamped Gauss-Newton step moves no component more than this.
+        callback: called as callback(iteration, r, step) after each accepted step.
+
+    A trial is accepted when the model converged there and the cost fell; the damping then
+    shrinks tenfold (towards Gauss-Newton), otherwise it grows tenfold.
+    """
+    x = np.asarray(x0, dtype=float)
+    r, J, ok, aux = evaluate(x)
+    if not ok:
+        return LeastSquares(x, r, J, aux, 0, False, "the model did not converge at the starting values")
+    mu = 1e-3
+    for it in range(max_iter):
+        if np.abs(np.linalg.lstsq(J, -r, rcond=None)[0]).max() <= xtol:
+            return LeastSquares(x, r, J, aux, it, True, "converged")
+        A = J.T @ J
+        step = np.linalg.solve(A + mu * np.diag(np.maximum(np.diag(A), 1e-300)), -J.T @ r)
+        r_t, J_t, ok_t, aux_t = evaluate(x + step)
+        if ok_t and np.all(np.isfinite(r_t)) and r_t @ r_t < r @ r:
+            x, r, J, aux = x + step, r_t, J_t, aux_t
+            mu = max(mu / 10, 1e-12)
+            if callback is not None:
+                callback(it + 1, r, step)
+        else:
+            mu *= 10
+    return LeastSquares(x, r, J, aux, max_iter, False, f"hit max_iter = {max_iter}; raise it or start nearer the optimum")
+
+
+def _values(x, params) -> dict:
+    return {p: x[i] if p in LINEAR_FIELDS else jnp.exp(x[i]) for i, p in enumerate(params)}
+
+
+def _solve_one(robot, e: Experiment, gravity, options):
+    return solve(robot, e.act, e.tip_load(gravity), gravity=gravity, **dict(options))
+
+
+@partial(jax.jit, static_argnames=("options",))
+def _solve_batch(robot, batch: Experiment, gravity, options):
+    return jax.vmap(lambda e: _solve_one(robot, e, gravity, options))(batch)
+
+
+def _deviations(robot, batch: Experiment, gravity, options):
+    """Model minus measured positions (E, n, 3) [m], and per experiment: converged, RMSE, tip error."""
+
+    def one(e):
+        sol = _solve_one(robot, e, gravity, options)
+        return shape_deviation(sol, e), (sol.converged, rmse(sol, e), tip_error(sol, e))
+
+    return jax.vmap(one)(batch)
+
+
+@partial(jax.jit, static_argnames=("params", "options"))
+def _fit_step(x, robot, batch, gravity, params, options):
+    """Weighted residuals (E n 3,), their exact Jacobian in x, and per-experiment statistics."""
+
+    def residual(x):
+        dev, stats = _deviations(dataclasses.replace(robot, **_values(x, params)), batch, gravity, options)
+        r = (dev * jnp.sqrt(batch.weight)[..., None]).ravel()
+        return r, (r, stats)
+
+    J, (r, stats) = jax.jacfwd(residual, has_aux=True)(x)
+    return r, J, stats
+
+
+_model_shapes = jax.jit(_deviations, static_argnames=("options",))
+
+
+@dataclasses.dataclass(frozen=True)
+class Calibration:
+    """Result of ``calibrate``; SI units (lengths in m) unless a name says otherwise.
+
+    Attributes:
+        params: the fitted Robot fields.
+        initial, values: their starting and fitted values.
+        std_errors: standard errors from the Gauss-Newton covariance s^2 (J^T J)^-1, with s^2 the
+            residual variance per coordinate (delta method for fields fitted in log space).
+        correlation: correlation matrix of the fitted fields, (p, p).
+        robot: the starting robot with the fitted values.
+        names: experiment names.
+        rmse_before, rmse_after, tip_error_before, tip_error_after: per experiment [m].
+        noise: the estimated measurement noise s per coordinate [m].
+        iterations, converged, message: Levenberg-Marquardt's outcome (every shape must solve).
+        seconds: wall time, compiles included.
+    """
+
+    params: tuple
+    initial: dict
+    values: dict
+    std_errors: dict
+    correlation: np.ndarray
+    robot: Robot
+    names: tuple
+    rmse_before: np.ndarray
+    rmse_after: np.ndarray
+    tip_error_before: np.ndarray
+    tip_error_after: np.ndarray
+    noise: float
+    iterations: int
+    converged: bool
+    message: str
+    seconds: float
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary: fitted values in SI, errors in mm and in % of the robot length."""
+        L = float(self.robot.length)
+        per_file = [
+            {
+                "name": n,
+                **{
+                    f"{k}_mm": float(getattr(self, k)[i]) * 1e3
+                    for k in ("rmse_before", "rmse_after", "tip_error_before", "tip_error_after")
+                },
+                "rmse_after_percent_of_length": 100 * float(self.rmse_after[i]) / L,
+                "tip_error_after_percent_of_length": 100 * float(self.tip_error_after[i]) / L,
+            }
+            for i, n in enumerate(self.names)
+        ]
+        return {
+            "params": list(self.params),
+            "initial": self.initial,
+            "values": self.values,
+            "std_errors": self.std_errors,
+            "correlation": self.correlation.tolist(),
+            "noise_mm": self.noise * 1e3,
+            "iterations": self.iterations,
+            "converged": self.converged,
+            "message": self.message,
+            "seconds": self.seconds,
+            "experiments": per_file,
+        }
+
+    def summary(self) -> str:
+        """A text table: fitted values with standard errors, then RMSE and tip error per experiment."""
+        L = float(self.robot.length)
+        lines = [f"{'field':<18}{'initial':>13}{'fitted':>13}{'std error':>12}"]
+        for p in self.params:
+            lines.append(f"{p:<18}{self.initial[p]:>13.6g}{self.values[p]:>13.6g}{self.std_errors[p]:>12.3g}")
+        lines.append("")
+        width = max(10, *(len(n) for n in self.names)) + 2
+        lines.append(f"{'experiment':<{width}}{'RMSE before':>13}{'RMSE after':>20}{'tip error after':>22}")
+        for i, n in enumerate(self.names):
+            after, tip = self.rmse_after[i] * 1e3, self.tip_error_after[i] * 1e3
+            lines.append(
+                f"{n:<{width}}{self.rmse_before[i] * 1e3:>10.3f} mm{after:>10.3f} mm ({100 * after / (L * 1e3):.2f}%)"
+                f"{tip:>10.3f} mm ({100 * tip / (L * 1e3):.2f}%)"
+            )
+        status = "converged" if self.converged else f"NOT converged: {self.message}"
+        lines.append(
+            f"\n{status} after {self.iterations} iterations in {self.seconds:.1f} s; "
+            f"estimated noise {self.noise * 1e3:.3f} mm per coordinate"
+        )
+        return "\n".join(lines)
+
+
+def calibrate(
+    robot: Robot,
+    experiments: Sequence[Experiment],
+    params: Sequence[str] = ("E_silicone",),
+    *,
+    max_iter: int = 30,
+    xtol: float = 1e-8,
+    gravity=STANDARD_GRAVITY,
+    progress: bool = True,
+    throw: bool = False,
+    **solve_options,
+) -> Calibration:
+    """Fits Robot fields to measured shapes by Levenberg-Marquardt with exact Jacobians (Sec. III.B).
+
+    The residuals are model minus measured positions at every measured point of every experiment
+    (weighted by ``Experiment.weight``), so the cost is the sum of the experiments' squared RMSEs
+    (eq. 39) times their point counts. Positive fields are fitted in log space.
+
+    Args:
+        robot: the robot with the starting values of ``params`` and every other field fixed.
+        experiments: measured shapes and their conditions (``tdct_jax.data.read_experiments``).
+        params: scalar Robot fields to fit, e.g. ("E_silicone", "tendon_offset").
+        max_iter: most Levenberg-Marquardt trial steps.
+        xtol: converged when the Gauss-Newton step changes no field by more than this (relative
+            for log-space fields, absolute for Poisson ratios).
+        gravity: world gravity [m/s^2] the shapes were measured under (None: none).
+        progress: show a progress bar (the first step includes the compile).
+        throw: raise ConvergenceError when the fit does not converge.
+        **solve_options: steps, transition, tendon_model, solve_tol, solve_max_iter for the solves.
+
+    Returns:
+        Calibration; check ``converged`` unless ``throw`` is set.
+
+    Raises:
+        ValueError: unknown or repeated params, no experiments, experiments that do not fit the robot.
+        ConvergenceError: with ``throw=True``, when the fit did not converge.
+    """
+    params = tuple(params)
+    _check_params(robot, params)
+    experiments = list(experiments)
+    if not experiments or not all(isinstance(e, Experiment) for e in experiments):
+        raise ValueError("experiments must be a non-empty sequence of tdct_jax.data.Experiment")
+    for e in experiments:
+        check_inputs(robot, e.act, e.load)
+    static = _options(solve_options)
+    batch, g = stack(experiments), gravity_vector(gravity)
+
+    start = perf_counter()
+    bar = tqdm(total=max_iter, desc="calibrating", unit="step", disable=not progress, leave=False)
+    bar.set_postfix_str("compiling")
+
+    def evaluate(x):
+        r, J, (ok, e_rms, e_tip) = _fit_step(jnp.asarray(x), robot, batch, g, params, static)
+        return np.asarray(r), np.asarray(J), bool(np.all(ok)), (np.asarray(e_rms), np.asarray(e_tip))
+
+    def report(it, r, step):
+        bar.update(it - bar.n)
+        bar.set_postfix_str(f"rms {np.sqrt(np.mean(r**2) * 3) * 1e3:.4f} mm, step {np.abs(step).max():.1e}")
+
+    x0 = np.array([float(getattr(robot, p)) for p in params])
+    x0 = np.where([p in LINEAR_FIELDS for p in params], x0, np.log(x0))
+    before = evaluate(x0)[3]
+    fit = levenberg_marquardt(evaluate, x0, max_iter=max_iter, xtol=xtol, callback=report)
+    bar.close()
+
+    values = {p: float(v) for p, v in _values(fit.x, params).items()}
+    m = 3 * int(np.count_nonzero(np.asarray(batch.weight)))
+    s2 = float(fit.residual @ fit.residual) / max(m - len(params), 1)
+    cov = s2 * np.linalg.pinv(fit.jacobian.T @ fit.jacobian)
+    se_x = np.sqrt(np.diag(cov))
+    scale = np.array([1.0 if p in LINEAR_FIELDS else values[p] for p in params])
+    result = Calibration(
+        params=params,
+        initial={p: float(getattr(robot, p)) for p in params},
+        values=values,
+        std_errors={p: float(scale[i] * se_x[i]) for i, p in enumerate(params)},
+        correlation=cov / np.outer(se_x, se_x),
+        robot=dataclasses.replace(robot, **values),
+        names=tuple(e.name for e in experiments),
+        rmse_before=before[0],
+        rmse_after=fit.aux[0],
+        tip_error_before=before[1],
+        tip_error_after=fit.aux[1],
+        noise=float(np.sqrt(s2)),
+        iterations=fit.iterations,
+        converged=fit.converged,
+        message=fit.message,
+        seconds=perf_counter() - start,
+    )
+    if throw and not result.converged:
+        raise ConvergenceError(f"calibration of {', '.join(params)} did not converge: {fit.message}")
+    return result
+
+
+def solve_experiments(robot: Robot, experiments: Sequence[Experiment], *, gravity=STANDARD_GRAVITY, **solve_options):
+    """The model's Solution under each experiment's conditions, batched along a leading axis.
+
+    ``solve_options``: steps, transition, tendon_model, solve_tol, solve_max_iter.
+    """
+    return _solve_batch(robot, stack(list(experiments)), gravity_vector(gravity), _options(solve_options))
+
+
+def _options(solve_options: dict) -> tuple:
+    """The checked solve options as a hashable (static) tuple."""
+    options = dict(steps=50, transition="balanced", tendon_model="exact", tol=TOL, max_iter=MAX_ITER)
+    options.update(nested_solve_options(solve_options))
+    solver_options(**options)
+    return tuple(sorted(options.items()))
+
+
+def _check_params(robot: Robot, params: tuple) -> None:
+    if not params or len(set(params)) != len(params):
+        raise ValueError(f"params = {params!r} must name at least one Robot field, each once")
+    for p in params:
+        if p not in SCALAR_FIELDS:
+            raise ValueError(f"params: {p!r} is not a scalar Robot field; allowed: {list(SCALAR_FIELDS)}")
+        if p not in LINEAR_FIELDS and not float(getattr(robot, p)) > 0:
+            raise ValueError(f"{p} = {float(getattr(robot, p)):g} must start positive: it is fitted in log space")
+
+
+def synthesize(
+    robot: Robot,
+    actuations: Sequence[Actuation],
+    *,
+    tip_masses: Sequence[float] | None = None,
+    loads: Sequence[TipLoad] | None = None,
+    n_points: int = FBG_POINTS,
+    noise: float = 1e-4,
+    seed: int = 0,
+    gravity=STANDARD_GRAVITY,
+    **solve_options,
+) -> list[Experiment]:
+    """FBG-like measured shapes from the model: positions at ``n_points`` equally spaced arc
+    lengths from base to tip, plus Gaussian noise of standard deviation ``noise`` [m] on every
+    coordinate (numpy's default generator seeded with ``seed``).
+
+    Args:
+        robot: the robot that "is measured".
+        actuations: one Actuation per experiment.
+        tip_masses: tip mass per experiment [kg] (default none).
+        loads: further tip force and moment per experiment, world frame (default none).
+        n_points: points per shape (>= 2).
+        noise: noise standard deviation [m] (>= 0).
+        seed: random seed.
+        gravity: world gravity [m/s^2] (None: none).
+        **solve_options: steps, transition, tendon_model, solve_tol, solve_max_iter.
+
+    Raises:
+        ValueError: bad counts or values; ConvergenceError: a shape that did not solve.
+    """
+    n_exp = len(actuations)
+    tip_masses = [0.0] * n_exp if tip_masses is None else list(tip_masses)
+    loads = [TipLoad()] * n_exp if loads is None else list(loads)
+    if n_exp == 0 or len(tip_masses) != n_exp or len(loads) != n_exp:
+        raise ValueError(f"need one actuation, tip mass and load per experiment, got {n_exp}, {len(tip_masses)} and {len(loads)}")
+    if not isinstance(n_points, (int, np.integer)) or n_points < 2:
+        raise ValueError(f"n_points = {n_points!r} must be an integer >= 2")
+    if not (np.isfinite(noise) and noise >= 0):
+        raise ValueError(f"noise = {noise!r} must be a finite standard deviation >= 0 [m]")
+    options = _options(solve_options)
+    s = np.linspace(0.0, float(robot.length), n_points)
+    exact = [
+        Experiment(s, np.zeros((n_points, 3)), a, ld, m, name=condition_name(a, m))
+        for a, ld, m in zip(actuations, loads, tip_masses, strict=True)
+    ]
+    for e in exact:
+        check_inputs(robot, e.act, e.load)
+    dev, (ok, _, _) = _model_shapes(robot, stack(exact), gravity_vector(gravity), options)
+    if not np.all(ok):
+        bad = [e.name for e, good in zip(exact, np.asarray(ok), strict=True) if not good]
+        raise ConvergenceError(f"synthesize: the model did not converge for {bad}")
+    rng = np.random.default_rng(seed)
+    return [
+        dataclasses.replace(e, position=np.asarray(p) + noise * rng.standard_normal((n_points, 3)))
+        for e, p in zip(exact, dev, strict=True)
+    ]
+
+
+def condition_name(act: Actuation, tip_mass: float = 0.0) -> str:
+    """A file-name-safe label of a measurement condition, e.g. "t6-0-0-0N_d80mm_m20g"."""
+    tensions = "-".join(f"{t:g}" for t in np.asarray(act.tensions))
+    return f"t{tensions}N_d{float(act.insertion) * 1e3:g}mm_m{float(tip_mass) * 1e3:g}g"
