@@ -17,7 +17,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from .data import Experiment, stack
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
@@ -253,12 +253,14 @@ def calibrate(
     batch, g = stack(experiments), gravity_vector(gravity)
 
     start = perf_counter()
-    bar = tqdm(total=max_iter, desc="calibrating", unit="step", disable=not progress, leave=False)
+    bar = tqdm(desc="calibrating", unit="step", disable=not progress, leave=False)
     bar.set_postfix_str("compiling")
+    evaluated = []
 
     def evaluate(x):
         r, J, (ok, e_rms, e_tip) = _fit_step(jnp.asarray(x), robot, batch, g, params, static)
-        return np.asarray(r), np.asarray(J), bool(np.all(ok)), (np.asarray(e_rms), np.asarray(e_tip))
+        evaluated.append((np.asarray(e_rms), np.asarray(e_tip)))
+        return np.asarray(r), np.asarray(J), bool(np.all(ok)), evaluated[-1]
 
     def report(it, r, step):
         bar.update(it - bar.n)
@@ -266,9 +268,9 @@ def calibrate(
 
     x0 = np.array([float(getattr(robot, p)) for p in params])
     x0 = np.where([p in LINEAR_FIELDS for p in params], x0, np.log(x0))
-    before = evaluate(x0)[3]
     fit = levenberg_marquardt(evaluate, x0, max_iter=max_iter, xtol=xtol, callback=report)
     bar.close()
+    before = evaluated[0]
 
     values = {p: float(v) for p, v in _values(fit.x, params).items()}
     m = 3 * int(np.count_nonzero(np.asarray(batch.weight)))

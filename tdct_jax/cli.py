@@ -219,8 +219,8 @@ def _synth_command(args) -> int:
         gravity=_gravity(args),
         steps=args.steps,
     )
-    for e in experiments:
-        print(write_experiment(Path(args.out) / f"{e.name}.csv", e))
+    for i, e in enumerate(experiments, start=1):
+        print(write_experiment(Path(args.out) / f"{i:02d}_{e.name}.csv", e))
     return 0
 
 

@@ -13,7 +13,8 @@ from .shooting import Solution
 def _pyplot():
     import matplotlib
 
-    matplotlib.use("Agg")
+    if "inline" not in matplotlib.get_backend():  # keep Jupyter's inline figures
+        matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     return plt

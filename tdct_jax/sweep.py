@@ -22,7 +22,7 @@ import numpy as np
 from jax import lax
 from jax.sharding import Mesh
 from jax.sharding import PartitionSpec as P
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from ._checks import as_array, check_range
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
