@@ -236,8 +236,9 @@ def _calibrate_command(args) -> int:
     print(json.dumps(fit.to_dict()) if args.json else fit.summary())
     if args.plot:
         from .plotting import plot_calibration
+        from .sweep import unit_of
 
-        fitted = ", ".join(f"{p} = {fit.values[p]:.4g}" for p in params)
+        fitted = ", ".join(f"{p} = {fit.values[p]:.4g} {unit_of(p).replace('_per_', '/')}" for p in params)
         plot_calibration(
             solve_experiments(fit.robot, experiments, **options), experiments, args.plot, title=f"calibrated: {fitted}"
         )

@@ -289,7 +289,7 @@ def write_csv(path, shape, inputs: dict, outputs: dict) -> Path:
     for k, v in inputs.items():
         v = v.reshape(n, -1)
         labels = [k] if v.shape[1] == 1 else [f"{k}_{i + 1}" for i in range(v.shape[1])]
-        columns.update({f"{label}_{_unit(k)}": v[:, i] for i, label in enumerate(labels)})
+        columns.update({f"{label}_{unit_of(k)}": v[:, i] for i, label in enumerate(labels)})
     columns.update({k: np.asarray(v).reshape(n) * 1 for k, v in outputs.items()})
     with path.open("w", newline="") as f:
         w = csv.writer(f)
@@ -298,7 +298,8 @@ def write_csv(path, shape, inputs: dict, outputs: dict) -> Path:
     return path
 
 
-def _unit(name: str) -> str:
+def unit_of(name: str) -> str:
+    """The SI unit of a sweepable input or Robot field, as written in CSV column names."""
     units = {
         "tensions": "N",
         "insertion": "m",
