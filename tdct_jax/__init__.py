@@ -6,7 +6,6 @@ jax.config.update("jax_enable_x64", True)
 
 from .calibrate import Calibration as Calibration  # noqa: E402
 from .calibrate import calibrate as calibrate  # noqa: E402
-from .calibrate import solve_experiments as solve_experiments  # noqa: E402
 from .calibrate import synthesize as synthesize  # noqa: E402
 from .data import Experiment as Experiment  # noqa: E402
 from .data import read_experiment as read_experiment  # noqa: E402

@@ -23,7 +23,17 @@ from .data import Experiment, stack
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .mechanics import rmse, shape_deviation, tip_error
 from .robot import SCALAR_FIELDS, Robot
-from .shooting import MAX_ITER, TOL, ConvergenceError, check_inputs, gravity_vector, nested_solve_options, solve, solver_options
+from .shooting import (
+    MAX_ITER,
+    TOL,
+    ConvergenceError,
+    Solution,
+    check_inputs,
+    gravity_vector,
+    nested_solve_options,
+    solve,
+    solver_options,
+)
 
 LINEAR_FIELDS = ("nu_silicone", "nu_tube")
 """Fields fitted as they are (they may be zero or negative); every other field is fitted in log space."""
@@ -83,21 +93,13 @@ def _values(x, params) -> dict:
     return {p: x[i] if p in LINEAR_FIELDS else jnp.exp(x[i]) for i, p in enumerate(params)}
 
 
-def _solve_one(robot, e: Experiment, gravity, options):
-    return solve(robot, e.act, e.tip_load(gravity), gravity=gravity, **dict(options))
-
-
-@partial(jax.jit, static_argnames=("options",))
-def _solve_batch(robot, batch: Experiment, gravity, options):
-    return jax.vmap(lambda e: _solve_one(robot, e, gravity, options))(batch)
-
-
 def _deviations(robot, batch: Experiment, gravity, options):
-    """Model minus measured positions (E, n, 3) [m], and per experiment: converged, RMSE, tip error."""
+    """Model minus measured positions (E, n, 3) [m], and per experiment: converged, RMSE, tip
+    error and the Solution."""
 
     def one(e):
-        sol = _solve_one(robot, e, gravity, options)
-        return shape_deviation(sol, e), (sol.converged, rmse(sol, e), tip_error(sol, e))
+        sol = solve(robot, e.act, e.tip_load(gravity), gravity=gravity, **dict(options))
+        return shape_deviation(sol, e), (sol.converged, rmse(sol, e), tip_error(sol, e), sol)
 
     return jax.vmap(one)(batch)
 
@@ -131,6 +133,8 @@ class Calibration:
         robot: the starting robot with the fitted values.
         names: experiment names.
         rmse_before, rmse_after, tip_error_before, tip_error_after: per experiment [m].
+        solutions: the model's Solutions at the fitted values, batched (one per experiment), e.g.
+            for ``plotting.plot_calibration``.
         noise: the estimated measurement noise s per coordinate [m].
         iterations, converged, message: Levenberg-Marquardt's outcome (every shape must solve).
         seconds: wall time, compiles included.
@@ -147,6 +151,7 @@ class Calibration:
     rmse_after: np.ndarray
     tip_error_before: np.ndarray
     tip_error_after: np.ndarray
+    solutions: Solution
     noise: float
     iterations: int
     converged: bool
@@ -258,8 +263,8 @@ def calibrate(
     evaluated = []
 
     def evaluate(x):
-        r, J, (ok, e_rms, e_tip) = _fit_step(jnp.asarray(x), robot, batch, g, params, static)
-        evaluated.append((np.asarray(e_rms), np.asarray(e_tip)))
+        r, J, (ok, e_rms, e_tip, sol) = _fit_step(jnp.asarray(x), robot, batch, g, params, static)
+        evaluated.append((np.asarray(e_rms), np.asarray(e_tip), sol))
         return np.asarray(r), np.asarray(J), bool(np.all(ok)), evaluated[-1]
 
     def report(it, r, step):
@@ -290,6 +295,7 @@ def calibrate(
         rmse_after=fit.aux[0],
         tip_error_before=before[1],
         tip_error_after=fit.aux[1],
+        solutions=fit.aux[2],
         noise=float(np.sqrt(s2)),
         iterations=fit.iterations,
         converged=fit.converged,
@@ -299,14 +305,6 @@ def calibrate(
     if throw and not result.converged:
         raise ConvergenceError(f"calibration of {', '.join(params)} did not converge: {fit.message}")
     return result
-
-
-def solve_experiments(robot: Robot, experiments: Sequence[Experiment], *, gravity=STANDARD_GRAVITY, **solve_options):
-    """The model's Solution under each experiment's conditions, batched along a leading axis.
-
-    ``solve_options``: steps, transition, tendon_model, solve_tol, solve_max_iter.
-    """
-    return _solve_batch(robot, stack(list(experiments)), gravity_vector(gravity), _options(solve_options))
 
 
 def _options(solve_options: dict) -> tuple:
@@ -374,7 +372,7 @@ def synthesize(
     ]
     for e in exact:
         check_inputs(robot, e.act, e.load)
-    dev, (ok, _, _) = _model_shapes(robot, stack(exact), gravity_vector(gravity), options)
+    dev, (ok, *_) = _model_shapes(robot, stack(exact), gravity_vector(gravity), options)
     if not np.all(ok):
         bad = [e.name for e, good in zip(exact, np.asarray(ok), strict=True) if not good]
         raise ConvergenceError(f"synthesize: the model did not converge for {bad}")

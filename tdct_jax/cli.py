@@ -225,7 +225,7 @@ def _synth_command(args) -> int:
 
 
 def _calibrate_command(args) -> int:
-    from .calibrate import calibrate, solve_experiments
+    from .calibrate import calibrate
     from .data import read_experiments
 
     robot = _robot(args)
@@ -239,9 +239,7 @@ def _calibrate_command(args) -> int:
         from .sweep import unit_of
 
         fitted = ", ".join(f"{p} = {fit.values[p]:.4g} {unit_of(p).replace('_per_', '/')}" for p in params)
-        plot_calibration(
-            solve_experiments(fit.robot, experiments, **options), experiments, args.plot, title=f"calibrated: {fitted}"
-        )
+        plot_calibration(fit.solutions, experiments, args.plot, title=f"calibrated: {fitted}")
     if not fit.converged:
         raise ConvergenceError(f"calibration did not converge: {fit.message}")
     return 0
