@@ -154,15 +154,22 @@ def positions_at(sol, s):
     interpolation error is O(h^4) like RK4's own. Arc lengths outside [0, L] are clamped to the
     ends. Differentiable in the solution (for calibration); not in ``s``.
     """
-    nodes = sol.s
+    nodes, p = sol.s, sol.position
+    n = nodes.size
     s = jnp.clip(jnp.asarray(s, dtype=nodes.dtype), nodes[0], nodes[-1])
-    k = jnp.clip(jnp.searchsorted(nodes, s, side="right") - 1, 0, nodes.size - 2)
+    k = jnp.clip(jnp.searchsorted(nodes, s, side="right") - 1, 0, n - 2)
     h = nodes[k + 1] - nodes[k]
     t = jnp.where(h > 0, (s - nodes[k]) / jnp.where(h > 0, h, 1.0), 0.0)[..., None]
-    tangent = jnp.einsum("nij,nj->ni", sol.rotation, sol.strain)
-    p0, p1, m0, m1 = sol.position[k], sol.position[k + 1], tangent[k], tangent[k + 1]
     h = h[..., None]
-    return (2 * t**3 - 3 * t**2 + 1) * p0 + (t**3 - 2 * t**2 + t) * h * m0 + (-2 * t**3 + 3 * t**2) * p1 + (t**3 - t**2) * h * m1
+    tangent = jnp.einsum("nij,nj->ni", sol.rotation, sol.strain)
+    # The node at s = d carries the backbone's strain, but p' jumps there (the silicone shears):
+    # the first silicone interval takes its left tangent from a one-sided cubic through 4 nodes.
+    j = (n - 1) // 2
+    q = p[jnp.minimum(j + jnp.arange(4), n - 1)]
+    h_right_of_d = jnp.broadcast_to((-11 * q[0] + 18 * q[1] - 9 * q[2] + 2 * q[3]) / 6, t.shape[:-1] + (3,))
+    hm0 = jnp.where(((k == j) & (nodes[j] > 0))[..., None], h_right_of_d, h * tangent[k])
+    p0, p1, hm1 = p[k], p[k + 1], h * tangent[k + 1]
+    return (2 * t**3 - 3 * t**2 + 1) * p0 + (t**3 - 2 * t**2 + t) * hm0 + (-2 * t**3 + 3 * t**2) * p1 + (t**3 - t**2) * hm1
 
 
 def shape_deviation(sol, measured):

@@ -137,3 +137,13 @@ def test_cli_synth_then_calibrate_recovers_the_modulus(tmp_path, capsys):
     assert "not a scalar Robot field" in capsys.readouterr().err
     assert main(["calibrate", str(tmp_path / "missing.csv")]) == 2
     assert "cannot read shape file" in capsys.readouterr().err
+
+
+def test_interpolation_is_as_accurate_as_the_nodes_across_the_tube_end(paper_case):
+    # p' jumps at s = d (the silicone shears, the tube does not); between nodes the model must
+    # still agree with a 8x finer solution as well as the nodes do.
+    robot, act, load, sol = paper_case
+    fine = tdct.solve(robot, act, load, steps=400, throw=True)
+    s = np.linspace(0.0, float(robot.length), 1601)
+    between = np.linalg.norm(np.asarray(tdct.positions_at(sol, s)) - np.asarray(tdct.positions_at(fine, s)), axis=1)
+    assert between.max() < 1e-8
