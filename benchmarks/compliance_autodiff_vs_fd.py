@@ -1,7 +1,8 @@
 """Exact (autodiff) compliance matrix against central differences: accuracy V-curve and cost.
 
-Run: python benchmarks/compliance_autodiff_vs_fd.py [--repeats 20]
-Writes benchmarks/results/compliance.json and benchmarks/results/compliance_fd_error.png.
+Run: python benchmarks/compliance_autodiff_vs_fd.py [--quick] [--repeats 20]
+Writes benchmarks/results/compliance.json and compliance_fd_error.png (compliance_quick.json and
+compliance_fd_error_quick.png with --quick: 3 repeats).
 """
 
 from __future__ import annotations
@@ -34,9 +35,10 @@ def _median_time(f, repeats):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=20)
-    parser.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    parser.add_argument("--quick", action="store_true", help="3 repeats")
     args = parser.parse_args()
-    out = Path(args.out)
+    repeats = 3 if args.quick else args.repeats
+    out, suffix = Path(__file__).parent / "results", "_quick" if args.quick else ""
     out.mkdir(parents=True, exist_ok=True)
 
     robot = tdct.Robot()
@@ -53,11 +55,11 @@ def main() -> None:
         for h in STEPS_N:
             fd = np.asarray(tdct.finite_difference_compliance(robot, act, load, step=h))
             errors.append(float(np.abs(fd - CM).max() / np.abs(CM).max()))
-        t_ad = _median_time(lambda act=act, load=load: tdct.compliance(robot, act, load), args.repeats)
+        t_ad = _median_time(lambda act=act, load=load: tdct.compliance(robot, act, load), repeats)
         t_fd = _median_time(
-            lambda act=act, load=load: tdct.finite_difference_compliance(robot, act, load, step=1e-5), args.repeats
+            lambda act=act, load=load: tdct.finite_difference_compliance(robot, act, load, step=1e-5), repeats
         )
-        t_solve = _median_time(lambda act=act, load=load: tdct.solve(robot, act, load).position, args.repeats)
+        t_solve = _median_time(lambda act=act, load=load: tdct.solve(robot, act, load).position, repeats)
         best = int(np.argmin(errors))
         row = dict(
             config=name,
@@ -78,9 +80,9 @@ def main() -> None:
             f"autodiff {t_ad * 1e3:6.1f} ms, FD {t_fd * 1e3:6.1f} ms ({t_fd / t_ad:.1f}x), one solve {t_solve * 1e3:5.1f} ms"
         )
 
-    write_result(out / "compliance.json", repeats=args.repeats, compile_and_first_compliance_s=compile_s, configs=rows)
-    plot_fd_error(rows, out / "compliance_fd_error.png")
-    print(f"wrote {out / 'compliance.json'} and {out / 'compliance_fd_error.png'}")
+    write_result(out / f"compliance{suffix}.json", repeats=repeats, compile_and_first_compliance_s=compile_s, configs=rows)
+    plot_fd_error(rows, out / f"compliance_fd_error{suffix}.png")
+    print(f"wrote {out / f'compliance{suffix}.json'} and {out / f'compliance_fd_error{suffix}.png'}")
 
 
 if __name__ == "__main__":

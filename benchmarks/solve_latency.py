@@ -1,7 +1,7 @@
 """Compile time, warm single-solve latency and Newton iterations for paper configurations.
 
-Run: python benchmarks/solve_latency.py [--repeats 200] [--steps 50]
-Writes benchmarks/results/latency.json. For steady numbers pin to one core: taskset -c 0 python ...
+Run: python benchmarks/solve_latency.py [--quick] [--repeats 200] [--steps 50]
+Writes benchmarks/results/latency.json (latency_quick.json with --quick: 20 repeats). For steady numbers pin to one core: taskset -c 0 python ...
 """
 
 from __future__ import annotations
@@ -31,8 +31,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=200)
     parser.add_argument("--steps", type=int, default=50)
-    parser.add_argument("--out", default=str(Path(__file__).parent / "results" / "latency.json"))
+    parser.add_argument("--quick", action="store_true", help="20 repeats")
     args = parser.parse_args()
+    repeats = 20 if args.quick else args.repeats
+    out = Path(__file__).parent / "results" / f"latency{'_quick' if args.quick else ''}.json"
 
     robot = tdct.Robot()
     t0 = time.perf_counter()
@@ -45,7 +47,7 @@ def main() -> None:
     for name, (tensions, insertion, mass) in CONFIGS.items():
         act, load = tdct.Actuation(tensions, insertion), tdct.TipLoad.from_mass(mass)
         sol = tdct.solve(robot, act, load, steps=args.steps, throw=True)
-        times = timings(lambda act=act, load=load: tdct.solve(robot, act, load, steps=args.steps).position, args.repeats)
+        times = timings(lambda act=act, load=load: tdct.solve(robot, act, load, steps=args.steps).position, repeats)
         times_ms = times * 1e3
         row = dict(
             config=name,
@@ -62,14 +64,14 @@ def main() -> None:
         )
 
     write_result(
-        args.out,
+        out,
         steps_per_segment=args.steps,
-        repeats=args.repeats,
+        repeats=repeats,
         compile_and_first_solve_s=compile_s,
         cache_entries=_solve._cache_size(),
         configs=rows,
     )
-    print(f"wrote {args.out}")
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

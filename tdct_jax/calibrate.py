@@ -24,15 +24,12 @@ from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .mechanics import rmse, shape_deviation, tip_error
 from .robot import SCALAR_FIELDS, Robot
 from .shooting import (
-    MAX_ITER,
-    TOL,
     ConvergenceError,
     Solution,
     check_inputs,
     gravity_vector,
     nested_solve_options,
     solve,
-    solver_options,
 )
 
 LINEAR_FIELDS = ("nu_silicone", "nu_tube")
@@ -309,10 +306,7 @@ def calibrate(
 
 def _options(solve_options: dict) -> tuple:
     """The checked solve options as a hashable (static) tuple."""
-    options = dict(steps=50, transition="balanced", tendon_model="exact", tol=TOL, max_iter=MAX_ITER)
-    options.update(nested_solve_options(solve_options))
-    solver_options(**options)
-    return tuple(sorted(options.items()))
+    return tuple(sorted(nested_solve_options(solve_options).items()))
 
 
 def _check_params(robot: Robot, params: tuple) -> None:

@@ -13,7 +13,7 @@ import numpy as np
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .mechanics import compliance, compliance_ellipsoid
 from .robot import SCALAR_FIELDS, Robot
-from .shooting import MAX_ITER, TOL, ConvergenceError, raise_if_failed, solve
+from .shooting import MAX_ITER, STEPS, TOL, ConvergenceError, raise_if_failed, solve
 
 
 def _floats(n: int | None = None):
@@ -50,7 +50,7 @@ def _parser() -> argparse.ArgumentParser:
         metavar="FIELD=VALUE",
         help="override one Robot field, SI units (e.g. E_silicone=1.1e6); repeatable, applied after --robot",
     )
-    described.add_argument("--steps", type=int, default=50, help="RK4 steps per segment (default 50)")
+    described.add_argument("--steps", type=int, default=STEPS, help=f"RK4 steps per segment (default {STEPS})")
     described.add_argument("--no-gravity", action="store_true", help="ignore the robot's own weight")
 
     common = argparse.ArgumentParser(add_help=False, parents=[described])

@@ -20,7 +20,7 @@ from jax import lax
 
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .robot import Robot
-from .shooting import MAX_ITER, TOL, gravity_vector, nested_solve_options, solve, solver_options
+from .shooting import gravity_vector, nested_solve_options, solve
 from .sweep import DEFAULT_CHUNK, Kernel, configure, mesh_for, prepare, run_batched, sweep, unflatten, write_csv, write_npz
 
 HEIGHT_TOL = 1e-9
@@ -215,10 +215,7 @@ def _optimum_point(base, point, kernel: Kernel):
 
 def _batch(robot, act, load, grid, batch, solve_options):
     """``sweep.prepare`` for one configuration or a grid / batch, plus the checked solve options."""
-    options = dict(steps=50, transition="balanced", tendon_model="exact", tol=TOL, max_iter=MAX_ITER)
-    options.update(nested_solve_options(solve_options))
-    solver_options(**options)
-    return *prepare(robot, act, load, grid, batch, single=True), options
+    return *prepare(robot, act, load, grid, batch, single=True), nested_solve_options(solve_options)
 
 
 def load_capacity(

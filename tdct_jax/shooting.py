@@ -22,6 +22,8 @@ TOL = 1e-10
 """Default convergence threshold on the scaled tip residual (max norm)."""
 MAX_ITER = 50
 """Default limit on Newton iterations."""
+STEPS = 50
+"""Default RK4 steps per segment."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -36,7 +38,7 @@ class SolverOptions:
             tilted by u x r_t) or "paper" (eqs. 21-22 as printed).
     """
 
-    steps: int = 50
+    steps: int = STEPS
     transition: str = "balanced"
     tendon_model: str = "exact"
 
@@ -293,7 +295,7 @@ def solve(
     act: Actuation,
     load: TipLoad | None = None,
     *,
-    steps: int = 50,
+    steps: int = STEPS,
     gravity=STANDARD_GRAVITY,
     transition: str = "balanced",
     tendon_model: str = "exact",
@@ -355,13 +357,17 @@ def solver_options(steps, transition, tendon_model, tol, max_iter) -> SolverOpti
 
 
 def nested_solve_options(solve_options: dict) -> dict:
-    """Keyword arguments for ``solve`` from steps, transition, tendon_model, solve_tol and
-    solve_max_iter: the options of a routine that runs solves inside an iteration of its own."""
+    """All five keyword arguments for ``solve`` but gravity, checked, defaults filled in, from steps,
+    transition, tendon_model, solve_tol and solve_max_iter: the options of a routine that runs
+    solves inside an iteration of its own."""
     allowed = {"steps", "transition", "tendon_model", "solve_tol", "solve_max_iter"}
     unknown = set(solve_options) - allowed
     if unknown:
         raise TypeError(f"unknown solve option(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
-    return {k.removeprefix("solve_"): v for k, v in solve_options.items()}
+    options = dict(steps=STEPS, transition="balanced", tendon_model="exact", tol=TOL, max_iter=MAX_ITER)
+    options.update({k.removeprefix("solve_"): v for k, v in solve_options.items()})
+    solver_options(**options)
+    return options
 
 
 def check_inputs(robot: Robot, act: Actuation, load: TipLoad) -> None:

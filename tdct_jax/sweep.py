@@ -28,7 +28,7 @@ from ._checks import as_array, check_range
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .mechanics import compliance_and_solution
 from .robot import SCALAR_FIELDS, Robot
-from .shooting import MAX_ITER, TOL, check_inputs, gravity_vector, solve, solver_options
+from .shooting import MAX_ITER, STEPS, TOL, check_inputs, gravity_vector, solve, solver_options
 from .so3 import tip_angle
 
 DEFAULT_CHUNK = 64
@@ -327,7 +327,7 @@ def sweep(
     chunk_size: int = DEFAULT_CHUNK,
     progress: bool = True,
     devices=None,
-    steps: int = 50,
+    steps: int = STEPS,
     gravity=STANDARD_GRAVITY,
     transition: str = "balanced",
     tendon_model: str = "exact",

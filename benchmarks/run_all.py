@@ -1,0 +1,88 @@
+"""Runs every benchmark, each in a fresh process, and writes a summary of their results.
+
+Run: python benchmarks/run_all.py [--quick]
+Each script writes its own benchmarks/results/<name>.json (<name>_quick.json with --quick); this
+one adds results/summary.md (summary_quick.md) with the headline table: each speed figure beside
+the tip error it was measured at. It fails only when a script fails (a crash or a disagreement
+between solvers), never on speed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).parent
+RESULTS = HERE / "results"
+SCRIPTS = ("solve_latency.py", "accuracy_steps.py", "baseline.py", "compliance_autodiff_vs_fd.py", "sweep_throughput.py")
+
+
+def _load(name: str, suffix: str) -> dict | None:
+    path = RESULTS / f"{name}{suffix}.json"
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def summary(suffix: str, seconds: dict) -> str:
+    """The headline table in markdown, from the results files of one run."""
+    lines = [f"# Benchmark summary{' (quick)' if suffix else ''}", ""]
+    latency, accuracy, base = _load("latency", suffix), _load("accuracy_steps", suffix), _load("baseline", suffix)
+    compliance, sweep = _load("compliance", suffix), _load("sweep_throughput", suffix)
+    if latency:
+        lines.append(f"Measured {latency['date']} on {latency['machine']}, jax {latency['jax']}.")
+        lines.append("")
+    if base:
+        lines += ["| configuration | steps | tip difference vs tdct_jax | numpy/scipy solve | tdct_jax solve | ratio |", "|---|---|---|---|---|---|"]
+        for r in base["rows"]:
+            lines.append(
+                f"| {r['config']} | {r['steps']} | {r['tip_rel_diff']:.1e} rel. | {r['baseline_solve_ms']:.1f} ms | "
+                f"{r['jax_solve_ms']:.2f} ms | {r['solve_ratio']:.1f}x |"
+            )
+        lines.append("")
+    if accuracy:
+        lines += ["| steps per segment | max tip error over the envelope | warm solve (median) |", "|---|---|---|"]
+        for r in accuracy["rows"]:
+            lines.append(f"| {r['steps_per_segment']} | {r['max_tip_error_um']:.2e} um | {r['solve_median_ms']:.2f} ms |")
+        lines += ["", f"Fewest steps within 1 um with a factor 2 to spare: {accuracy['recommended_steps_per_segment']}.", ""]
+    if latency:
+        lines += [f"Compile and first solve: {latency['compile_and_first_solve_s']:.1f} s.", ""]
+    if compliance:
+        lines += ["| configuration | exact compliance | solve | ratio |", "|---|---|---|---|"]
+        for r in compliance["configs"]:
+            lines.append(f"| {r['config']} | {r['autodiff_ms']:.1f} ms | {r['solve_ms']:.1f} ms | {r['autodiff_over_solve']:.2f}x |")
+        lines.append("")
+    if sweep:
+        lines += ["| batch | solves/s (vmap sweep, 50 steps) |", "|---|---|"]
+        for r in (r for r in sweep["rows"] if r["kind"] == "batch"):
+            lines.append(f"| {r['batch']} | {r['solves_per_s']:.1f} |")
+        lines.append("")
+    lines += ["Script times: " + ", ".join(f"{k} {v:.0f} s" for k, v in seconds.items()), ""]
+    return "\n".join(lines)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="every script in its quick mode (a few minutes in all)")
+    args = parser.parse_args()
+    suffix = "_quick" if args.quick else ""
+    seconds = {}
+    for script in SCRIPTS:
+        print(f"== {script}", flush=True)
+        start = time.perf_counter()
+        done = subprocess.run([sys.executable, str(HERE / script), *(["--quick"] if args.quick else [])], cwd=HERE)
+        seconds[script] = time.perf_counter() - start
+        if done.returncode:
+            print(f"run_all: {script} failed with exit code {done.returncode}", file=sys.stderr)
+            return 1
+    text = summary(suffix, seconds)
+    (RESULTS / f"summary{suffix}.md").write_text(text)
+    print(text)
+    print(f"total {sum(seconds.values()):.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
