@@ -56,9 +56,7 @@ def main() -> None:
             fd = np.asarray(tdct.finite_difference_compliance(robot, act, load, step=h))
             errors.append(float(np.abs(fd - CM).max() / np.abs(CM).max()))
         t_ad = _median_time(lambda act=act, load=load: tdct.compliance(robot, act, load), repeats)
-        t_fd = _median_time(
-            lambda act=act, load=load: tdct.finite_difference_compliance(robot, act, load, step=1e-5), repeats
-        )
+        t_fd = _median_time(lambda act=act, load=load: tdct.finite_difference_compliance(robot, act, load, step=1e-5), repeats)
         t_solve = _median_time(lambda act=act, load=load: tdct.solve(robot, act, load).position, repeats)
         best = int(np.argmin(errors))
         row = dict(

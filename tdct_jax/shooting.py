@@ -22,7 +22,7 @@ TOL = 1e-10
 """Default convergence threshold on the scaled tip residual (max norm)."""
 MAX_ITER = 50
 """Default limit on Newton iterations."""
-STEPS = 50
+STEPS = 16
 """Default RK4 steps per segment."""
 
 

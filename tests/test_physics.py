@@ -115,7 +115,9 @@ def test_global_equilibrium_and_continuity_at_transition(robot, case):
     act, load = CASES[case]
     sol = tdct.solve(robot, act, load, throw=True)
     f_err, m_err = _equilibrium_defect(robot, act, load, sol)
-    assert f_err < 1e-9 and m_err < 1e-9
+    # Force: round-off. Moment: Simpson's rule for the weight's lever on the solver's nodes is the
+    # limit (4.9e-9 at 16 steps, against 0.65% for the paper's printed transition).
+    assert f_err < 1e-12 and m_err < 1e-8
     # Both sides of s = d: total (rod + tendon) force and moment continuous; the rod's own jump.
     k = (len(sol.s) - 1) // 2
     assert float(sol.s[k]) == pytest.approx(float(act.insertion))
