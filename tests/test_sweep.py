@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import tdct_jax as tdct
+from tdct_jax.shooting import STEPS
 
 BASE = tdct.Actuation((6.0, 0.0, 0.0, 2.0), 0.0)
 GRID = {"insertion": np.array([0.0, 0.08, 0.16]), "tip_mass": np.array([0.0, 0.03])}
@@ -35,7 +36,7 @@ def test_grid_sweep_equals_one_by_one_solves(robot, grid_sweep):
 def test_batch_of_robot_fields_zips_points(robot):
     batch = {"E_silicone": np.array([0.7e6, 1.1e6]), "insertion": np.array([0.02, 0.12])}
     res = tdct.sweep(robot, BASE, batch=batch, shapes=True, compliance=True, progress=False)
-    assert res.shape == (2,) and res.position.shape == (2, 101, 3)
+    assert res.shape == (2,) and res.position.shape == (2, 2 * STEPS + 1, 3)
     for k in range(2):
         r = tdct.Robot(E_silicone=batch["E_silicone"][k])
         act = tdct.Actuation(BASE.tensions, batch["insertion"][k])
