@@ -31,6 +31,11 @@ def summary(suffix: str, seconds: dict) -> str:
     lines = [f"# Benchmark summary{' (quick)' if suffix else ''}", ""]
     latency, accuracy, base = _load("latency", suffix), _load("accuracy_steps", suffix), _load("baseline", suffix)
     compliance, sweep = _load("compliance", suffix), _load("sweep_throughput", suffix)
+    errors = {r["steps_per_segment"]: r["max_tip_error_um"] for r in accuracy["rows"]} if accuracy else {}
+
+    def accuracy_at(steps) -> str:
+        return f"{errors[steps]:.2g} um" if steps in errors else "see accuracy_steps"
+
     if latency:
         lines.append(f"Measured {latency['date']} on {latency['machine']}, jax {latency['jax']}.")
         lines.append("")
@@ -39,7 +44,7 @@ def summary(suffix: str, seconds: dict) -> str:
             "| configuration | steps | tip difference vs tdct_jax | numpy/scipy solve | tdct_jax solve | ratio |",
             "|---|---|---|---|---|---|",
         ]
-        for r in base["rows"]:
+        for r in base["configs"]:
             lines.append(
                 f"| {r['config']} | {r['steps']} | {r['tip_relative_difference']:.1e} rel. | {r['baseline_solve_ms']:.0f} ms | "
                 f"{r['tdct_jax_solve_ms']:.1f} ms | {r['solve_ratio']:.0f}x |"
@@ -51,20 +56,33 @@ def summary(suffix: str, seconds: dict) -> str:
             lines.append(f"| {r['steps_per_segment']} | {r['max_tip_error_um']:.2e} um | {r['solve_median_ms']:.2f} ms |")
         lines += ["", f"Fewest steps within 1 um with a factor 2 to spare: {accuracy['recommended_steps_per_segment']}.", ""]
     if latency:
-        lines += [f"Compile and first solve: {latency['compile_and_first_solve_s']:.1f} s.", ""]
+        lines += ["| configuration | warm solve median | p90 | tip error at this step count |", "|---|---|---|---|"]
+        for r in latency["configs"]:
+            lines.append(
+                f"| {r['config']} | {r['median_ms']:.1f} ms | {r['p90_ms']:.1f} ms | {accuracy_at(latency['steps_per_segment'])} |"
+            )
+        lines += ["", f"Compile and first solve: {latency['compile_and_first_solve_s']:.1f} s.", ""]
     if compliance:
-        lines += ["| configuration | exact compliance | solve | ratio |", "|---|---|---|---|"]
+        lines += [
+            "| configuration | exact compliance | solve | ratio | best central differences vs exact |",
+            "|---|---|---|---|---|",
+        ]
         for r in compliance["configs"]:
             lines.append(
-                f"| {r['config']} | {r['autodiff_ms']:.1f} ms | {r['solve_ms']:.1f} ms | {r['autodiff_over_solve']:.2f}x |"
+                f"| {r['config']} | {r['autodiff_ms']:.1f} ms | {r['solve_ms']:.1f} ms | {r['autodiff_over_solve']:.2f}x | "
+                f"{r['best_fd_error']:.1e} rel. |"
             )
         lines.append("")
     if sweep:
-        lines += ["| batch | solves/s (vmap sweep, 50 steps) |", "|---|---|"]
+        lines += [
+            f"| batch | solves/s (vmap sweep, {sweep['steps']} steps) | failed | tip error at this step count |",
+            "|---|---|---|---|",
+        ]
         for r in (r for r in sweep["rows"] if r["kind"] == "batch"):
-            lines.append(f"| {r['batch']} | {r['solves_per_s']:.1f} |")
+            lines.append(f"| {r['batch']} | {r['solves_per_s']:.1f} | {r['failed']} | {accuracy_at(sweep['steps'])} |")
         lines.append("")
-    lines += ["Script times: " + ", ".join(f"{k} {v:.0f} s" for k, v in seconds.items()), ""]
+    if seconds:
+        lines += ["Script times: " + ", ".join(f"{k} {v:.0f} s" for k, v in seconds.items()), ""]
     return "\n".join(lines)
 
 

@@ -1,6 +1,6 @@
 """Compile time, warm single-solve latency and Newton iterations for paper configurations.
 
-Run: python benchmarks/solve_latency.py [--quick] [--repeats 200] [--steps 50]
+Run: python benchmarks/solve_latency.py [--quick] [--repeats 200] [--steps 16]
 Writes benchmarks/results/latency.json (latency_quick.json with --quick: 20 repeats). For steady numbers pin to one core: taskset -c 0 python ...
 """
 
@@ -15,7 +15,7 @@ import numpy as np
 from _common import timings, write_result
 
 import tdct_jax as tdct
-from tdct_jax.shooting import _solve
+from tdct_jax.shooting import STEPS, _solve
 
 CONFIGS = {
     "6 N, 80 mm, 20 g (Fig. 6)": ((6.0, 0, 0, 0), 0.080, 0.020),
@@ -30,7 +30,7 @@ PAPER_SECONDS = 0.82
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=200)
-    parser.add_argument("--steps", type=int, default=50)
+    parser.add_argument("--steps", type=int, default=STEPS)
     parser.add_argument("--quick", action="store_true", help="20 repeats")
     args = parser.parse_args()
     repeats = 20 if args.quick else args.repeats

@@ -16,6 +16,7 @@ import numpy as np
 from _common import write_result
 
 import tdct_jax as tdct
+from tdct_jax.shooting import STEPS
 from tdct_jax.sweep import DEFAULT_CHUNK, lanes_per_call
 
 
@@ -84,7 +85,7 @@ def main() -> None:
         rows.append(dict(kind="warm start" if warm else "cold start", batch=n_paths * n_steps, chunk=chunk, **rec))
         print(rows[-1], flush=True)
     name = "sweep_throughput_quick.json" if args.quick else "sweep_throughput.json"
-    write_result(Path(__file__).parent / "results" / name, steps=50, repeats=repeats, rows=rows)
+    write_result(Path(__file__).parent / "results" / name, steps=STEPS, repeats=repeats, rows=rows)
     print(f"{'kind':<11} {'batch':>6} {'chunk':>6} {'solves/s':>9} {'first call s':>12} {'iterations':>10} failed")
     for r in rows:
         print(
