@@ -26,6 +26,12 @@ def _load(name: str, suffix: str) -> dict | None:
     return json.loads(path.read_text()) if path.exists() else None
 
 
+def _table(header: tuple, rows: list) -> list[str]:
+    """A markdown table and the blank line after it."""
+    cells = [f"| {' | '.join(map(str, row))} |" for row in (header, *rows)]
+    return [cells[0], "|" + "---|" * len(header), *cells[1:], ""]
+
+
 def summary(suffix: str, seconds: dict) -> str:
     """The headline table in markdown, from the results files of one run."""
     lines = [f"# Benchmark summary{' (quick)' if suffix else ''}", ""]
@@ -37,50 +43,63 @@ def summary(suffix: str, seconds: dict) -> str:
         return f"{errors[steps]:.2g} um" if steps in errors else "see accuracy_steps"
 
     if latency:
-        lines.append(f"Measured {latency['date']} on {latency['machine']}, jax {latency['jax']}.")
-        lines.append("")
+        lines += [f"Measured {latency['date']} on {latency['machine']}, jax {latency['jax']}.", ""]
     if base:
-        lines += [
-            "| configuration | steps | tip difference vs tdct_jax | numpy/scipy solve | tdct_jax solve | ratio |",
-            "|---|---|---|---|---|---|",
-        ]
-        for r in base["configs"]:
-            lines.append(
-                f"| {r['config']} | {r['steps']} | {r['tip_relative_difference']:.1e} rel. | {r['baseline_solve_ms']:.0f} ms | "
-                f"{r['tdct_jax_solve_ms']:.1f} ms | {r['solve_ratio']:.0f}x |"
-            )
-        lines.append("")
+        lines += _table(
+            ("configuration", "steps", "tip difference vs tdct_jax", "numpy/scipy solve", "tdct_jax solve", "ratio"),
+            [
+                (
+                    r["config"],
+                    r["steps"],
+                    f"{r['tip_relative_difference']:.1e} rel.",
+                    f"{r['baseline_solve_ms']:.0f} ms",
+                    f"{r['tdct_jax_solve_ms']:.1f} ms",
+                    f"{r['solve_ratio']:.0f}x",
+                )
+                for r in base["configs"]
+            ],
+        )
     if accuracy:
-        lines += ["| steps per segment | max tip error over the envelope | warm solve (median) |", "|---|---|---|"]
-        for r in accuracy["rows"]:
-            lines.append(f"| {r['steps_per_segment']} | {r['max_tip_error_um']:.2e} um | {r['solve_median_ms']:.2f} ms |")
-        lines += ["", f"Fewest steps within 1 um with a factor 2 to spare: {accuracy['recommended_steps_per_segment']}.", ""]
+        lines += _table(
+            ("steps per segment", "max tip error over the envelope", "warm solve (median)"),
+            [
+                (r["steps_per_segment"], f"{r['max_tip_error_um']:.2e} um", f"{r['solve_median_ms']:.2f} ms")
+                for r in accuracy["rows"]
+            ],
+        )
+        lines += [f"Fewest steps within 1 um with a factor 2 to spare: {accuracy['recommended_steps_per_segment']}.", ""]
     if latency:
-        lines += ["| configuration | warm solve median | p90 | tip error at this step count |", "|---|---|---|---|"]
-        for r in latency["configs"]:
-            lines.append(
-                f"| {r['config']} | {r['median_ms']:.1f} ms | {r['p90_ms']:.1f} ms | {accuracy_at(latency['steps_per_segment'])} |"
-            )
-        lines += ["", f"Compile and first solve: {latency['compile_and_first_solve_s']:.1f} s.", ""]
+        lines += _table(
+            ("configuration", "warm solve median", "p90", "tip error at this step count"),
+            [
+                (r["config"], f"{r['median_ms']:.1f} ms", f"{r['p90_ms']:.1f} ms", accuracy_at(latency["steps_per_segment"]))
+                for r in latency["configs"]
+            ],
+        )
+        lines += [f"Compile and first solve: {latency['compile_and_first_solve_s']:.1f} s.", ""]
     if compliance:
-        lines += [
-            "| configuration | exact compliance | solve | ratio | best central differences vs exact |",
-            "|---|---|---|---|---|",
-        ]
-        for r in compliance["configs"]:
-            lines.append(
-                f"| {r['config']} | {r['autodiff_ms']:.1f} ms | {r['solve_ms']:.1f} ms | {r['autodiff_over_solve']:.2f}x | "
-                f"{r['best_fd_error']:.1e} rel. |"
-            )
-        lines.append("")
+        lines += _table(
+            ("configuration", "exact compliance", "solve", "ratio", "best central differences vs exact"),
+            [
+                (
+                    r["config"],
+                    f"{r['autodiff_ms']:.1f} ms",
+                    f"{r['solve_ms']:.1f} ms",
+                    f"{r['autodiff_over_solve']:.2f}x",
+                    f"{r['best_fd_error']:.1e} rel.",
+                )
+                for r in compliance["configs"]
+            ],
+        )
     if sweep:
-        lines += [
-            f"| batch | solves/s (vmap sweep, {sweep['steps']} steps) | failed | tip error at this step count |",
-            "|---|---|---|---|",
-        ]
-        for r in (r for r in sweep["rows"] if r["kind"] == "batch"):
-            lines.append(f"| {r['batch']} | {r['solves_per_s']:.1f} | {r['failed']} | {accuracy_at(sweep['steps'])} |")
-        lines.append("")
+        lines += _table(
+            ("batch", f"solves/s (vmap sweep, {sweep['steps']} steps)", "failed", "tip error at this step count"),
+            [
+                (r["batch"], f"{r['solves_per_s']:.1f}", r["failed"], accuracy_at(sweep["steps"]))
+                for r in sweep["rows"]
+                if r["kind"] == "batch"
+            ],
+        )
     if seconds:
         lines += ["Script times: " + ", ".join(f"{k} {v:.0f} s" for k, v in seconds.items()), ""]
     return "\n".join(lines)

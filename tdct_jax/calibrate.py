@@ -21,7 +21,7 @@ from tqdm import tqdm
 
 from .data import Experiment, stack
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
-from .mechanics import rmse, shape_deviation, tip_error
+from .mechanics import shape_errors
 from .robot import SCALAR_FIELDS, Robot
 from .shooting import (
     ConvergenceError,
@@ -96,7 +96,8 @@ def _deviations(robot, batch: Experiment, gravity, options):
 
     def one(e):
         sol = solve(robot, e.act, e.tip_load(gravity), gravity=gravity, **dict(options))
-        return shape_deviation(sol, e), (sol.converged, rmse(sol, e), tip_error(sol, e), sol)
+        dev, e_rms, e_tip = shape_errors(sol, e)
+        return dev, (sol.converged, e_rms, e_tip, sol)
 
     return jax.vmap(one)(batch)
 
@@ -257,12 +258,13 @@ def calibrate(
     start = perf_counter()
     bar = tqdm(desc="calibrating", unit="step", disable=not progress, leave=False)
     bar.set_postfix_str("compiling")
-    evaluated = []
+    first = []
 
     def evaluate(x):
         r, J, (ok, e_rms, e_tip, sol) = _fit_step(jnp.asarray(x), robot, batch, g, params, static)
-        evaluated.append((np.asarray(e_rms), np.asarray(e_tip), sol))
-        return np.asarray(r), np.asarray(J), bool(np.all(ok)), evaluated[-1]
+        stats = (np.asarray(e_rms), np.asarray(e_tip), sol)
+        first[:] = first or [stats]
+        return np.asarray(r), np.asarray(J), bool(np.all(ok)), stats
 
     def report(it, r, step):
         bar.update(it - bar.n)
@@ -272,7 +274,7 @@ def calibrate(
     x0 = np.where([p in LINEAR_FIELDS for p in params], x0, np.log(x0))
     fit = levenberg_marquardt(evaluate, x0, max_iter=max_iter, xtol=xtol, callback=report)
     bar.close()
-    before = evaluated[0]
+    before = first[0]
 
     values = {p: float(v) for p, v in _values(fit.x, params).items()}
     m = 3 * int(np.count_nonzero(np.asarray(batch.weight)))

@@ -178,19 +178,22 @@ def shape_deviation(sol, measured):
     return positions_at(sol, measured.s) - measured.position
 
 
+def shape_errors(sol, measured):
+    """(shape_deviation, rmse, tip_error) from one interpolation of the model."""
+    dev, w = shape_deviation(sol, measured), measured.weight
+    last = w.size - 1 - jnp.argmax(w[::-1] > 0)
+    return dev, jnp.sqrt(jnp.sum(w * jnp.sum(dev**2, axis=-1)) / jnp.sum(w)), jnp.linalg.norm(dev[last])
+
+
 def rmse(sol, measured):
     """Root-mean-square distance between model and measured shape (eq. 39) [m].
 
     Points are weighted by ``measured.weight`` (padding in a stacked batch has weight 0).
     Divide by ``robot.length`` for the paper's "% of total length".
     """
-    w = measured.weight
-    d2 = jnp.sum(shape_deviation(sol, measured) ** 2, axis=-1)
-    return jnp.sqrt(jnp.sum(w * d2) / jnp.sum(w))
+    return shape_errors(sol, measured)[1]
 
 
 def tip_error(sol, measured):
     """Distance between model and measured position at the last measured point [m]."""
-    w = measured.weight
-    last = w.size - 1 - jnp.argmax(w[::-1] > 0)
-    return jnp.linalg.norm(shape_deviation(sol, measured)[last])
+    return shape_errors(sol, measured)[2]

@@ -95,7 +95,7 @@ def plot_calibration(solutions: Solution, experiments, path: str | Path | None =
         path: where to save a PNG; the figure is returned either way.
         title: figure title.
     """
-    from .mechanics import rmse, tip_error
+    from .mechanics import shape_errors
 
     plt = _pyplot()
     fig = plt.figure(figsize=(12, 5))
@@ -106,7 +106,8 @@ def plot_calibration(solutions: Solution, experiments, path: str | Path | None =
     for i, (e, c) in enumerate(zip(experiments, colors, strict=True)):
         sol = jax.tree.map(lambda a, i=i: a[i], solutions)
         p, q = np.asarray(sol.position) * 1e3, np.asarray(e.position) * 1e3
-        label = f"{e.name}: RMSE {float(rmse(sol, e)) * 1e3:.2f} mm, tip {float(tip_error(sol, e)) * 1e3:.2f} mm"
+        _, e_rms, e_tip = shape_errors(sol, e)
+        label = f"{e.name}: RMSE {float(e_rms) * 1e3:.2f} mm, tip {float(e_tip) * 1e3:.2f} mm"
         ax.plot(p[:, 2], p[:, 1], color=c, lw=1.8, label=label)
         ax.plot(q[:, 2], q[:, 1], "o", mfc="none", color=c, ms=4)
         ax3.plot(p[:, 0], p[:, 2], p[:, 1], color=c, lw=1.8)
