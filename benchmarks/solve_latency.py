@@ -15,7 +15,7 @@ import numpy as np
 from _common import timings, write_result
 
 import tdct_jax as tdct
-from tdct_jax.shooting import STEPS, _solve
+from tdct_jax.shooting import STEPS, shoot
 
 CONFIGS = {
     "6 N, 80 mm, 20 g (Fig. 6)": ((6.0, 0, 0, 0), 0.080, 0.020),
@@ -68,7 +68,7 @@ def main() -> None:
         steps_per_segment=args.steps,
         repeats=repeats,
         compile_and_first_solve_s=compile_s,
-        cache_entries=_solve._cache_size(),
+        cache_entries=shoot._cache_size(),
         configs=rows,
     )
     print(f"wrote {out}")

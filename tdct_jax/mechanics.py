@@ -9,6 +9,7 @@ finite differences). ``finite_difference_compliance`` keeps the paper's method f
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import NamedTuple
 
 import jax
@@ -17,10 +18,11 @@ import numpy as np
 
 from .loads import Actuation, TipLoad
 from .robot import SCALAR_FIELDS, Robot
-from .shooting import MAX_ITER, TOL, raise_if_failed, solve
+from .shooting import MAX_ITER, TOL, raise_if_failed, shoot, solve, solve_arguments
+from .so3 import rotation_columns
 
 
-def _tip_pose_jacobian(solve_at, w, throw, solve_options):
+def _tip_pose_jacobian(solve_at, w):
     """(d(tip position, tip rotation vector)/dw, solution); (6, n), rotation part vee(dR R^T), world frame."""
 
     def pose(w):
@@ -28,8 +30,11 @@ def _tip_pose_jacobian(solve_at, w, throw, solve_options):
         return (sol.tip_position, sol.tip_rotation), sol
 
     (Jp, JR), sol = jax.jacfwd(pose, has_aux=True)(w)
-    A = jnp.einsum("ijk,lj->ilk", JR, sol.tip_rotation)
-    J = jnp.concatenate([Jp, jnp.stack([A[2, 1], A[0, 2], A[1, 0]])], axis=0)
+    return jnp.concatenate([Jp, rotation_columns(JR, sol.tip_rotation)]), sol
+
+
+def _checked(J, sol, throw, solve_options):
+    """(J, sol), raising with ``throw`` or masking J with NaN when the solve did not converge."""
     if throw:
         raise_if_failed(sol, solve_options.get("tol", TOL), solve_options.get("max_iter", MAX_ITER))
         return J, sol
@@ -41,13 +46,16 @@ def compliance(
 ):
     """Tip compliance CM = d p(L) / d F_e (eq. 41), exact, in m/N.
 
+    Computed from Newton's Jacobians at the converged root (one extra 6x6 solve); derivatives of
+    CM itself (e.g. with respect to the insertion) go through forward-mode autodiff of the solve.
+
     Args:
         robot, act, load: as for ``tdct.solve``; the compliance is taken about this tip load.
         full: return the 6x6 compliance d(tip position, tip rotation vector) / d(F_e, M_e) instead
             (blocks in m/N, m/(N m), rad/N, rad/(N m); rotation vector in the world frame).
         throw: raise ``ConvergenceError`` if the solution did not converge (needs concrete values);
             with False (under jit or vmap) a non-converged solution gives a matrix of NaN.
-        **solve_options: steps, gravity, transition, tendon_model, tol, max_iter for ``tdct.solve``.
+        **solve_options: steps, gravity, transition, tendon_model, tol, max_iter, guess for ``tdct.solve``.
 
     Returns:
         CM, shape (3, 3) (or (6, 6) with ``full``).
@@ -58,13 +66,38 @@ def compliance(
 
 def compliance_and_solution(robot: Robot, act: Actuation, load: TipLoad | None = None, *, throw: bool = True, **solve_options):
     """The 6x6 compliance of ``compliance(..., full=True)`` and the Solution it was taken at, in one solve."""
-    load = TipLoad() if load is None else load
+    args, opts = solve_arguments(robot, act, load, **solve_options)
+    leaves, tree = jax.tree.flatten(args)
+    return _checked(*_compliance(leaves, tree, opts), throw, solve_options)
 
-    def solve_at(w):
-        return solve(robot, act, TipLoad(w[:3], w[3:]), **solve_options)
 
-    w = jnp.concatenate([jnp.asarray(load.force), jnp.asarray(load.moment)])
-    return _tip_pose_jacobian(solve_at, w, throw, solve_options)
+# The pytrees travel as their leaves: custom_jvp builds zero tangents by unflattening, and a Robot
+# of zeros would fail the Robot's own checks.
+@functools.partial(jax.jit, static_argnums=(1, 2))
+def _compliance(leaves, tree, opts):
+    return _compliance_from_root(leaves, tree, opts)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2))
+def _compliance_from_root(leaves, tree, opts):
+    sol, C = shoot(*jax.tree.unflatten(tree, leaves), opts)
+    return C, sol
+
+
+@_compliance_from_root.defjvp
+def _compliance_jvp(tree, opts, primals, tangents):
+    """Derivatives of the compliance: forward-mode autodiff of the compliance's own autodiff."""
+
+    def by_autodiff(leaves):
+        robot, act, load, *rest = jax.tree.unflatten(tree, leaves)
+
+        def solve_at(w):
+            return shoot(robot, act, TipLoad(w[:3], w[3:]), *rest, opts)[0]
+
+        w = jnp.concatenate([jnp.asarray(load.force), jnp.asarray(load.moment)])
+        return _tip_pose_jacobian(solve_at, w)
+
+    return jax.jvp(by_autodiff, primals, tangents)
 
 
 def kinematic_jacobian(robot: Robot, act: Actuation, load: TipLoad | None = None, *, throw: bool = True, **solve_options):
@@ -79,7 +112,7 @@ def kinematic_jacobian(robot: Robot, act: Actuation, load: TipLoad | None = None
         return solve(robot, Actuation(w[:-1], w[-1]), load, **solve_options)
 
     w = jnp.concatenate([jnp.asarray(act.tensions), jnp.reshape(jnp.asarray(act.insertion), (1,))])
-    return _tip_pose_jacobian(solve_at, w, throw, solve_options)[0]
+    return _checked(*_tip_pose_jacobian(solve_at, w), throw, solve_options)[0]
 
 
 def parameter_jacobian(
@@ -98,7 +131,7 @@ def parameter_jacobian(
         return solve(dataclasses.replace(robot, **{p: w[i] for i, p in enumerate(params)}), act, load, **solve_options)
 
     w = jnp.stack([jnp.asarray(getattr(robot, p)) for p in params])
-    return _tip_pose_jacobian(solve_at, w, throw, solve_options)[0]
+    return _checked(*_tip_pose_jacobian(solve_at, w), throw, solve_options)[0]
 
 
 def finite_difference_compliance(

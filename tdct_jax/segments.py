@@ -88,38 +88,68 @@ def _tendon_tangent(r, v, u):
 def strains(seg: Segment, R, N, M):
     """Solves the constitutive relations for (v, u) given the world-frame totals N, M."""
     bf, bm = R.T @ N, R.T @ M
+    if not seg.tilt:
+        return _tilt_free(seg, bf, bm)
+    w = _constitutive(seg, bf, bm)
+    return w[:3], w[3:]
+
+
+def _tilt_free(seg: Segment, bf, bm):
+    """(v, u) with every tendon tangent e3: exact for the "paper" tendon model, else Newton's guess."""
     tau = seg.tau
     v = E3 + (bf - jnp.sum(tau) * E3) / seg.K_se
     if seg.backbone:
         v = v * E3
     u = (bm - jnp.sum(tau[:, None] * jnp.cross(seg.r, E3[None]), axis=0)) / seg.K_bt
-    if not seg.tilt:
-        return v, u
+    return v, u
+
+
+def _residual_and_jacobian(seg: Segment, w, bf, bm):
+    """The constitutive relations F(w) = 0 for w = (v, u) and their symmetric Jacobian (eq. 1).
+
+    In the backbone the shear rows and columns are replaced by the identity (v_x = v_y = 0).
+    """
+    v, u = w[:3], w[3:]
+    tau = seg.tau
+    pb = _tendon_tangent(seg.r, v, u)
+    norm = jnp.linalg.norm(pb, axis=-1)
+    t = pb / norm[:, None]
+    F = jnp.concatenate([seg.K_se * (v - E3) + tau @ t - bf, seg.K_bt * u + tau @ jnp.cross(seg.r, t) - bm])
     rh = hat(seg.r)
+    P = (tau / norm)[:, None, None] * (jnp.eye(3)[None] - t[:, :, None] * t[:, None, :])
+    PW = P @ rh
+    J = jnp.block(
+        [
+            [jnp.diag(seg.K_se) + P.sum(0), -PW.sum(0)],
+            [(rh @ P).sum(0), jnp.diag(seg.K_bt) - (rh @ PW).sum(0)],
+        ]
+    )
+    if seg.backbone:
+        keep = jnp.array([0.0, 0.0, 1.0, 1.0, 1.0, 1.0])
+        J = J * keep[:, None] * keep[None, :] + jnp.diag(1.0 - keep)
+        F = F * keep
+    return F, J
+
+
+@jax.custom_jvp
+def _constitutive(seg: Segment, bf, bm):
+    """w = (v, u) solving the constitutive relations, by NEWTON_STEPS Newton steps from the tilt-free guess."""
 
     def newton_step(_, w):
-        v, u = w[:3], w[3:]
-        pb = _tendon_tangent(seg.r, v, u)
-        norm = jnp.linalg.norm(pb, axis=-1)
-        t = pb / norm[:, None]
-        F_f = seg.K_se * (v - E3) + tau @ t - bf
-        F_m = seg.K_bt * u + tau @ jnp.cross(seg.r, t) - bm
-        P = (tau / norm)[:, None, None] * (jnp.eye(3)[None] - t[:, :, None] * t[:, None, :])
-        PW = P @ rh
-        J = jnp.block(
-            [
-                [jnp.diag(seg.K_se) + P.sum(0), -PW.sum(0)],
-                [(rh @ P).sum(0), jnp.diag(seg.K_bt) - (rh @ PW).sum(0)],
-            ]
-        )
-        F = jnp.concatenate([F_f, F_m])
-        if seg.backbone:
-            J = J.at[:2].set(jnp.eye(6)[:2])
-            F = F.at[:2].set(0.0)
+        F, J = _residual_and_jacobian(seg, w, bf, bm)
         return w - jnp.linalg.solve(J, F)
 
-    w = lax.fori_loop(0, NEWTON_STEPS, newton_step, jnp.concatenate([v, u]))
-    return w[:3], w[3:]
+    return lax.fori_loop(0, NEWTON_STEPS, newton_step, jnp.concatenate(_tilt_free(seg, bf, bm)))
+
+
+@_constitutive.defjvp
+def _constitutive_jvp(primals, tangents):
+    """Implicit differentiation at the converged strains: dw = -J^-1 (dF/d inputs) d inputs."""
+    seg, bf, bm = primals
+    w = _constitutive(seg, bf, bm)
+    _, J = _residual_and_jacobian(seg, w, bf, bm)
+    _, dF = jax.jvp(lambda *a: _residual_and_jacobian(a[0], w, *a[1:])[0], primals, tangents)
+    return w, -jnp.linalg.solve(J, dF)
 
 
 def rod_force(seg: Segment, y: State, v, u):

@@ -14,7 +14,7 @@ from .integrate import rk4
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .robot import Robot
 from .segments import E3, Segment, State, paper_transition, rod_force, strains, vector_field
-from .so3 import orthonormalize, tip_angle
+from .so3 import orthonormalize, rotation_columns, tip_angle
 
 TRANSITIONS = ("balanced", "paper")
 TENDON_MODELS = ("exact", "paper")
@@ -137,7 +137,10 @@ def _straight_guess(robot, act, load, gravity, F_c):
 
 
 def _integrate(robot, act, load, gravity, opts, x, F_c, path=False):
-    """Shoots from base unknowns x (N(0), M(0) scaled by F_c) to the tip; returns (residual, states)."""
+    """Shoots from base unknowns x (N(0), M(0) scaled by F_c) to the tip.
+
+    Returns the residual and the tip state (with ``path``: the states at every node).
+    """
     back, sil = segments(robot, act, opts)
     L, d = robot.length, act.insertion
     y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:] * F_c * L)
@@ -158,24 +161,26 @@ def _integrate(robot, act, load, gravity, opts, x, F_c, path=False):
     y_L = out_s[0] if path else out_s
     res = jnp.concatenate([(y_L.N - load.force) / F_c, (y_L.M - load.moment) / (F_c * L)])
     if not path:
-        return res, None
+        return res, y_L
     ys = jax.tree.map(lambda a, b: jnp.concatenate([a, b[1:]]), out_b[1], out_s[1])
     return res, ys
 
 
 def _newton(F, x0, tol, max_iter):
-    """Levenberg-Marquardt-damped Newton on F(x) = 0 with exact jacfwd Jacobians.
+    """Levenberg-Marquardt-damped Newton on F(x)[0] = 0 with exact jacfwd Jacobians.
 
-    The damping mu shrinks tenfold after each step that lowers |F| and grows tenfold after each
-    that does not, so the iteration is Newton's (quadratic) near the root and a short
-    gradient step far from it. The first pass evaluates x0 itself, so the Jacobian code appears
-    once in the compiled loop. Returns the root and (residual, Newton steps taken).
+    F returns (residual, outputs): Newton also carries the Jacobian of the outputs (the tip pose),
+    taken in the same forward pass. The damping mu shrinks tenfold after each step that lowers
+    |F| and grows tenfold after each that does not, so the iteration is Newton's (quadratic) near
+    the root and a short gradient step far from it. The first pass evaluates x0 itself, so the
+    Jacobian code appears once in the compiled loop and the last Jacobians are at the root.
+    Returns the root and (residual, Newton steps taken, (d residual / dx, d outputs / dx)).
     """
 
     def value_and_jac(x):
         def fr(x):
-            r = F(x)
-            return r, r
+            out = F(x)
+            return out, out[0]
 
         return jax.jacfwd(fr, has_aux=True)(x)
 
@@ -187,15 +192,17 @@ def _newton(F, x0, tol, max_iter):
         x, r, J, mu, it, x_try = c
         J_try, r_try = value_and_jac(x_try)
         ok = jnp.all(jnp.isfinite(r_try)) & (jnp.sum(r_try**2) < jnp.sum(r**2))
-        x, r, J = (jnp.where(ok, new, old) for new, old in ((x_try, x), (r_try, r), (J_try, J)))
+        x, r, J = jax.tree.map(lambda new, old: jnp.where(ok, new, old), (x_try, r_try, J_try), (x, r, J))
         mu = jnp.where(ok, mu / 10, mu * 10)
-        x_try = x - jnp.linalg.solve(J.T @ J + mu * jnp.eye(x.size), J.T @ r)
+        J_r = J[0]
+        x_try = x - jnp.linalg.solve(J_r.T @ J_r + mu * jnp.eye(x.size), J_r.T @ r)
         return x, r, J, mu, it + 1, x_try
 
     n = x0.size
-    init = (x0, jnp.full(n, jnp.inf), jnp.eye(n), jnp.asarray(1e-5), 0, x0)
-    x, r, _, _, it, _ = lax.while_loop(not_done, body, init)
-    return x, (r, (it - 1).astype(x.dtype))  # float: custom_root's aux must take float tangents
+    J0 = jax.tree.map(lambda o: jnp.zeros(jnp.shape(o) + (n,)), jax.eval_shape(F, x0))
+    init = (x0, jnp.full(n, jnp.inf), J0, jnp.asarray(1e-5), 0, x0)
+    x, r, J, _, it, _ = lax.while_loop(not_done, body, init)
+    return x, (r, (it - 1).astype(x.dtype), J)  # float: custom_root's aux must take float tangents
 
 
 STAGES = (1, 4, 16)
@@ -203,30 +210,32 @@ STAGES = (1, 4, 16)
 
 
 def _continuation(F_at, x0, x_straight, tol, max_iter):
-    """Solves F_at(1)(x) = 0 from x0, ramping all loads in stages when plain Newton fails.
+    """Solves F_at(1)(x)[0] = 0 from x0, ramping all loads in stages when plain Newton fails.
 
-    F_at(lam) is the residual with tensions, tip load and gravity scaled by lam; the straight-rod
-    guess is linear in the loads, so lam * x_straight starts each ramp. Returns
-    (root, (residual, total Newton steps)).
+    F_at(lam) gives the residual (and outputs, see _newton) with tensions, tip load and gravity
+    scaled by lam; the straight-rod guess is linear in the loads, so lam * x_straight starts each
+    ramp. Returns (root, (residual, total Newton steps, the last Jacobians)).
     """
 
     def not_done(c):
         return ~c[-1]
 
     def body(c):
-        x, r, it, K, stage, _ = c
+        x, r, it, J, K, stage, _ = c
         lam = stage / K
         guess = jnp.where(stage == 1, jnp.where(K == STAGES[0], x0, lam * x_straight), x)
-        x_new, (r_new, it_new) = _newton(F_at(lam), guess, tol, max_iter)
+        x_new, (r_new, it_new, J_new) = _newton(F_at(lam), guess, tol, max_iter)
         ok = jnp.max(jnp.abs(r_new)) <= tol
         K_next = jnp.where(ok, K, K * (STAGES[1] // STAGES[0]))
         stage_next = jnp.where(ok, stage + 1, 1)
         done = (ok & (stage == K)) | (K_next > STAGES[-1])
-        return x_new, r_new, it + it_new, K_next, stage_next, done
+        return x_new, r_new, it + it_new, J_new, K_next, stage_next, done
 
-    init = (x0, jnp.full(x0.size, jnp.inf), jnp.zeros((), x0.dtype), STAGES[0], 1, False)
-    x, r, it, *_ = lax.while_loop(not_done, body, init)
-    return x, (r, it)
+    n = x0.size
+    J0 = jax.tree.map(lambda o: jnp.zeros(jnp.shape(o) + (n,)), jax.eval_shape(F_at(1.0), x0))
+    init = (x0, jnp.full(n, jnp.inf), jnp.zeros((), x0.dtype), J0, STAGES[0], 1, False)
+    x, r, it, J, *_ = lax.while_loop(not_done, body, init)
+    return x, (r, it, J)
 
 
 def _tangent_solve(g, y):
@@ -234,7 +243,13 @@ def _tangent_solve(g, y):
 
 
 @jax.jit(static_argnames=("opts",))
-def _solve(robot, act, load, gravity, tol, max_iter, guess, opts: SolverOptions) -> Solution:
+def shoot(robot, act, load, gravity, tol, max_iter, guess, opts: SolverOptions) -> tuple[Solution, jax.Array]:
+    """The compiled solve: the Solution, and the 6x6 tip compliance d(tip position, tip rotation
+    vector) / d(F_e, M_e) (eq. 41) from Newton's Jacobians at the root, for one 6x6 solve more.
+
+    The compliance is exact in value but has no derivatives of its own (``tdct.compliance``
+    supplies them). Unchecked: ``solve_arguments`` checks the arguments.
+    """
     F_c = _scale(robot, act, load, gravity)
     x_straight = _straight_guess(robot, act, load, gravity, F_c)
     x_warm = jnp.concatenate([guess[:3] / F_c, guess[3:] / (F_c * robot.length)])
@@ -243,14 +258,25 @@ def _solve(robot, act, load, gravity, tol, max_iter, guess, opts: SolverOptions)
     def F_at(lam):
         act_lam = dataclasses.replace(act, tensions=lam * act.tensions)
         load_lam = TipLoad(lam * load.force, lam * load.moment)
-        return lambda x: _integrate(robot, act_lam, load_lam, lam * gravity, opts, x, F_c)[0]
+
+        def F(x):
+            res, tip = _integrate(robot, act_lam, load_lam, lam * gravity, opts, x, F_c)
+            return res, (tip.p, tip.R)
+
+        return F
 
     def solve_root(F, x0):
         return _continuation(F_at, x0, x_straight, tol, max_iter)
 
-    x, (_, iterations) = lax.custom_root(F_at(1.0), x0, solve_root, _tangent_solve, has_aux=True)
+    x, (_, iterations, (J_res, (J_p, J_R))) = lax.custom_root(
+        lambda x: F_at(1.0)(x)[0], x0, solve_root, _tangent_solve, has_aux=True
+    )
     res, ys = _integrate(robot, act, load, gravity, opts, x, F_c, path=True)
-    return _assemble(robot, act, opts, ys, res, tol, iterations.astype(jnp.int32))
+    sol = _assemble(robot, act, opts, ys, res, tol, iterations.astype(jnp.int32))
+    # The tip load enters only the residual: d res / d(F_e, M_e) = -diag(1 / F_c, 1 / (F_c L)).
+    dx_dw = jnp.linalg.solve(J_res, jnp.diag(jnp.repeat(jnp.stack([1 / F_c, 1 / (F_c * robot.length)]), 3)))
+    C = jnp.concatenate([J_p @ dx_dw, rotation_columns(J_R @ dx_dw, sol.tip_rotation)])
+    return sol, C
 
 
 def _node_quantities(back: Segment, sil: Segment, y: State, in_backbone):
@@ -332,15 +358,43 @@ def solve(
         ValueError: bad input (names field, value and allowed range).
         ConvergenceError: with ``throw=True``, when the residual stays above ``tol``.
     """
-    opts = solver_options(steps, transition, tendon_model, tol, max_iter)
-    load = TipLoad() if load is None else load
-    gravity = gravity_vector(gravity)
-    guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
-    check_inputs(robot, act, load)
-    sol = _solve(robot, act, load, gravity, tol, max_iter, guess, opts)
+    args, opts = solve_arguments(
+        robot,
+        act,
+        load,
+        steps=steps,
+        gravity=gravity,
+        transition=transition,
+        tendon_model=tendon_model,
+        tol=tol,
+        max_iter=max_iter,
+        guess=guess,
+    )
+    sol = shoot(*args, opts)[0]
     if throw:
         raise_if_failed(sol, tol, max_iter)
     return sol
+
+
+def solve_arguments(
+    robot,
+    act,
+    load=None,
+    *,
+    steps=STEPS,
+    gravity=STANDARD_GRAVITY,
+    transition="balanced",
+    tendon_model="exact",
+    tol=TOL,
+    max_iter=MAX_ITER,
+    guess=None,
+) -> tuple[tuple, SolverOptions]:
+    """Checks ``solve``'s arguments; returns the array arguments of ``shoot`` and its static options."""
+    opts = solver_options(steps, transition, tendon_model, tol, max_iter)
+    load = TipLoad() if load is None else load
+    guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
+    check_inputs(robot, act, load)
+    return (robot, act, load, gravity_vector(gravity), tol, max_iter, guess), opts
 
 
 def gravity_vector(gravity):

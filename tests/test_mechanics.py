@@ -2,6 +2,7 @@
 
 import dataclasses
 
+import jax
 import numpy as np
 import pytest
 from conftest import NO_GRAVITY, rel_err
@@ -38,6 +39,21 @@ def test_autodiff_compliance_matches_central_differences_when_bent(robot):
     R1 = tdct.solve(robot, act, tdct.TipLoad(load.force + dF)).tip_rotation
     W = np.asarray(R1 @ R0.T)
     assert rel_err((W - W.T)[[2, 0, 1], [1, 2, 0]] / 2, np.asarray(full[3:, :3]) @ dF) < 1e-4
+
+
+def test_compliance_is_differentiable_in_the_insertion(robot):
+    """The compliance comes from Newton's Jacobians at the root; its own derivative must still be
+    the derivative (not the zero tangent of a by-product): against central differences."""
+    load = tdct.TipLoad.from_mass(0.02)
+
+    def CM(d):
+        return tdct.compliance(robot, tdct.Actuation((8.0, 0.0, 0.0, 0.0), d), load, throw=False)
+
+    dCM = np.asarray(jax.jacfwd(CM)(0.08))
+    h = 1e-6
+    fd = (np.asarray(CM(0.08 + h)) - np.asarray(CM(0.08 - h))) / (2 * h)
+    assert np.abs(dCM).max() > 0.1  # m/N per m: the tube stiffens the robot
+    assert rel_err(dCM, fd) < 1e-6
 
 
 @pytest.mark.parametrize("d", [1e-4, 0.08, 0.16 - 1e-4])

@@ -8,7 +8,7 @@ import numpy as np
 from conftest import rel_err
 
 import tdct_jax as tdct
-from tdct_jax.shooting import _solve
+from tdct_jax.shooting import shoot
 
 
 def envelope(n, seed=0):
@@ -46,10 +46,10 @@ def test_converges_over_the_operating_envelope(robot):
 
 def test_no_retracing_when_only_values_change(paper_case):
     robot, act, load, _ = paper_case
-    before = _solve._cache_size()
+    before = shoot._cache_size()
     for tau in (1.0, 2.0, 3.0):
         tdct.solve(dataclasses.replace(robot, E_silicone=tau * 1e6), tdct.Actuation((tau, 0, 0, 0), 0.01 * tau), load)
-    assert _solve._cache_size() == before
+    assert shoot._cache_size() == before
 
 
 def test_reverse_and_forward_gradients_agree_with_central_differences(paper_case):
