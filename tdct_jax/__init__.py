@@ -34,7 +34,10 @@ from .shooting import ConvergenceError as ConvergenceError  # noqa: E402
 from .shooting import Solution as Solution  # noqa: E402
 from .shooting import SolverOptions as SolverOptions  # noqa: E402
 from .shooting import solve as solve  # noqa: E402
+from .sweep import SweepChunk as SweepChunk  # noqa: E402
 from .sweep import SweepResult as SweepResult  # noqa: E402
+from .sweep import gather as gather  # noqa: E402
 from .sweep import sweep as sweep  # noqa: E402
+from .sweep import sweep_chunks as sweep_chunks  # noqa: E402
 
 __version__ = "0.1.0"

@@ -21,7 +21,7 @@ from jax import lax
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .robot import Robot
 from .shooting import gravity_vector, nested_solve_options, solve
-from .sweep import DEFAULT_CHUNK, Kernel, configure, mesh_for, prepare, run_batched, sweep, unflatten, write_csv, write_npz
+from .sweep import Kernel, configure, mesh_for, prepare, run_batched, sweep, unflatten, write_csv, write_npz
 
 HEIGHT_TOL = 1e-9
 """Default tolerance on the tip height [m] for the load capacity."""
@@ -227,7 +227,7 @@ def load_capacity(
     height: float = 0.0,
     tol: float = HEIGHT_TOL,
     max_iter: int = 30,
-    chunk_size: int = DEFAULT_CHUNK,
+    chunk_size: int | None = None,
     progress: bool = True,
     devices=None,
     gravity=STANDARD_GRAVITY,
@@ -259,7 +259,7 @@ def optimal_insertion(
     n_curve: int = 33,
     tol: float = SLOPE_TOL,
     max_iter: int = 30,
-    chunk_size: int = DEFAULT_CHUNK,
+    chunk_size: int | None = None,
     progress: bool = True,
     devices=None,
     gravity=STANDARD_GRAVITY,

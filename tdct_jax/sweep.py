@@ -1,10 +1,12 @@
 """Batched sweeps: many solves through one compiled ``vmap``, in chunks of bounded size, with a
-progress bar, sharded over every device JAX sees.
+progress bar, sharded over this process's devices and split over JAX's processes.
 
 A sweep varies named inputs around a base configuration: the actuation ("tensions" [N],
 "insertion" [m]), the tip load ("force" [N], "moment" [N m], "tip_mass" [kg], whose weight adds
 to the force) and any scalar Robot field ("E_silicone" [Pa], "tendon_offset" [m], ...). A
-``grid`` takes the product of axes; a ``batch`` zips columns of equal length.
+``grid`` takes the product of axes; a ``batch`` zips columns of equal length. Results come back
+whole (``sweep``), chunk by chunk (``sweep_chunks``), or streamed to an .npz file (``sweep(out=)``,
+one part per process after ``jax.distributed.initialize``, read back by ``gather``).
 """
 
 from __future__ import annotations
@@ -12,9 +14,14 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
-from collections.abc import Callable, Mapping
+import os
+import re
+import tempfile
+import zipfile
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from time import perf_counter
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -22,6 +29,7 @@ import numpy as np
 from jax import lax
 from jax.sharding import Mesh
 from jax.sharding import PartitionSpec as P
+from numpy.lib.format import open_memmap
 from tqdm import tqdm
 
 from ._checks import as_array, check_range
@@ -31,10 +39,15 @@ from .robot import SCALAR_FIELDS, Robot
 from .shooting import MAX_ITER, STEPS, TOL, check_inputs, gravity_vector, solve, solver_options
 from .so3 import tip_angle
 
-DEFAULT_CHUNK = 64
-"""Configurations per compiled call (bounds memory; a smaller sweep rounds up to a power of two).
-On the 2-core CPU 64 measured fastest (36 solves/s against 21-25 at 16, 256 and 1024;
-benchmarks/sweep_throughput.py)."""
+CHUNK_SIZES = {"cpu": 64, "gpu": 8192}
+"""Default configurations per compiled call, by device platform (``chunk_size=`` overrides; a
+smaller sweep rounds up to a power of two; other platforms take the cpu value). cpu: 64 measured
+fastest on the 2-core CPU (36 solves/s against 21-25 at 16, 256 and 1024;
+benchmarks/sweep_throughput.py). gpu: provisional, near the best batch of a batch-last prototype
+on one H100 (874,000 solves/s at 10,000 lanes, 2-8x less at 10^5-10^6; ../shared/perf-notes.md),
+to be replaced by what benchmarks/gpu_throughput.py measures."""
+DEFAULT_CHUNK = CHUNK_SIZES["cpu"]
+"""The default chunk size on the CPU, where the CPU benchmarks measure."""
 AXIS = "batch"
 """Name of the device-mesh axis the batch is sharded over."""
 
@@ -143,16 +156,21 @@ def _run_chunk(base, points, kernel: Kernel):
     def lanes(base, points):
         return jax.vmap(lambda p: kernel.function(base, p, kernel))(points)
 
-    if kernel.mesh is None:
+    if kernel.mesh is None or kernel.mesh.size == 1:
         return lanes(base, points)
     sharded = jax.shard_map(lanes, mesh=kernel.mesh, in_specs=(P(), P(AXIS)), out_specs=P(AXIS), check_vma=False)
     return sharded(base, points)
 
 
-def mesh_for(devices) -> Mesh | None:
-    """A 1-D mesh over ``devices`` (default: all of ``jax.devices()``), or None for one device."""
-    devices = jax.devices() if devices is None else list(devices)
-    return Mesh(np.asarray(devices), (AXIS,)) if len(devices) > 1 else None
+def mesh_for(devices) -> Mesh:
+    """A 1-D mesh over ``devices`` (default: this process's devices, ``jax.local_devices()``)."""
+    return Mesh(np.asarray(jax.local_devices() if devices is None else list(devices)), (AXIS,))
+
+
+def default_chunk_size(mesh: Mesh | None = None) -> int:
+    """``CHUNK_SIZES`` for the platform of the mesh's devices (default: the default backend's)."""
+    platform = jax.default_backend() if mesh is None else mesh.devices.flat[0].platform
+    return CHUNK_SIZES.get(platform, CHUNK_SIZES["cpu"])
 
 
 def lanes_per_call(n: int, chunk_size: int, n_devices: int = 1) -> int:
@@ -162,27 +180,42 @@ def lanes_per_call(n: int, chunk_size: int, n_devices: int = 1) -> int:
     return -(-chunk // n_devices) * n_devices
 
 
-def run_batched(kernel: Kernel, base, points: dict, *, chunk_size=DEFAULT_CHUNK, progress=True, desc="solving", per_point=1):
-    """Runs ``kernel`` over the leading axis of ``points`` in chunks; returns numpy outputs.
+def iter_batched(
+    kernel: Kernel, base, points: dict, *, chunk_size=None, progress=True, desc="solving", per_point=1
+) -> Iterator[tuple[int, dict]]:
+    """Runs ``kernel`` over the leading axis of ``points`` in chunks, yielding each chunk's
+    (first row, numpy outputs) as soon as it is computed.
 
     Every chunk has the same static shape (the last is padded by repeating its final point), so
     one compile serves the whole sweep and any later sweep with the same chunk size.
-    ``per_point`` is the number of solves each point stands for (the progress bar counts solves).
+    ``chunk_size`` None takes ``default_chunk_size`` for the kernel's devices. ``per_point`` is
+    the number of solves each point stands for (the progress bar counts solves).
     """
+    if chunk_size is None:
+        chunk_size = default_chunk_size(kernel.mesh)
     if not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
-        raise ValueError(f"chunk_size = {chunk_size!r} must be an integer >= 1")
+        raise ValueError(f"chunk_size = {chunk_size!r} must be an integer >= 1 (or None for the backend's default)")
     n = len(next(iter(points.values())))
     chunk = lanes_per_call(n, chunk_size, 1 if kernel.mesh is None else kernel.mesh.size)
-    parts = []
+    # one device: commit the points to it, so jit runs there and not on the default device
+    device = kernel.mesh.devices.flat[0] if kernel.mesh is not None and kernel.mesh.size == 1 else None
     with tqdm(total=n * per_point, unit="solve", desc=desc, disable=not progress, dynamic_ncols=True) as bar:
         for start in range(0, n, chunk):
             bar.set_postfix_str("compiling" if start == 0 else "")
             index = np.minimum(np.arange(start, start + chunk), n - 1)
-            out = jax.device_get(_run_chunk(base, {k: v[index] for k, v in points.items()}, kernel))
+            chunk_points = {k: v[index] for k, v in points.items()}
+            if device is not None:
+                chunk_points = jax.device_put(chunk_points, device)
+            out = jax.device_get(_run_chunk(base, chunk_points, kernel))
             m = min(chunk, n - start)
-            parts.append({k: v[:m] for k, v in out.items()})
             bar.update(m * per_point)
-        bar.set_postfix_str("")
+            bar.set_postfix_str("")
+            yield start, {k: v[:m] for k, v in out.items()}
+
+
+def run_batched(kernel: Kernel, base, points: dict, **options) -> dict:
+    """``iter_batched``'s chunks joined: numpy outputs over the whole leading axis of ``points``."""
+    parts = [out for _, out in iter_batched(kernel, base, points, **options)]
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
@@ -314,6 +347,103 @@ def unit_of(name: str) -> str:
     return "kg_per_m3" if name.startswith("density") else "1" if name.startswith("nu") else "m"
 
 
+@dataclasses.dataclass(frozen=True)
+class SweepChunk:
+    """One chunk of a sweep, as ``sweep_chunks`` yields it.
+
+    Attributes:
+        start, stop: the chunk holds points [start, stop) of the sweep's points in C order (a
+            grid's last axis fastest; ``np.unravel_index(i, shape)`` gives a point's grid index).
+        shape: the whole sweep's shape.
+        inputs: each swept input at the chunk's points, leading axis stop - start.
+        outputs: tip_position, tip_rotation, ... as on ``SweepResult``, leading axis stop - start.
+    """
+
+    start: int
+    stop: int
+    shape: tuple
+    inputs: dict
+    outputs: dict
+
+
+class _Plan(NamedTuple):
+    """A checked sweep: what to run, and on which part of the points."""
+
+    kernel: Kernel
+    base: tuple
+    points: dict  # this process's rows
+    shape: tuple
+    axes: dict | None
+    lead: int  # leading axes of a row: 1, or 2 with warm starts (path, point along it)
+    first: int  # this process's first row
+
+
+def _plan(
+    robot,
+    act,
+    load,
+    *,
+    grid=None,
+    batch=None,
+    warm_start=False,
+    shapes=False,
+    compliance=False,
+    devices=None,
+    steps=STEPS,
+    gravity=STANDARD_GRAVITY,
+    transition="balanced",
+    tendon_model="exact",
+    tol=TOL,
+    max_iter=MAX_ITER,
+) -> _Plan:
+    """Checks a sweep's arguments and keeps this process's share of the rows (paths with warm
+    starts): the k-th of ``jax.process_count()`` contiguous parts."""
+    solver_options(steps, transition, tendon_model, tol, max_iter)
+    robot, act, load, points, shape, axes = prepare(robot, act, load, grid, batch)
+    options = (("steps", steps), ("transition", transition), ("tendon_model", tendon_model), ("tol", tol), ("max_iter", max_iter))
+    function = _solve_point
+    if warm_start:
+        if grid is None:
+            raise ValueError("warm_start=True needs grid=: the solves run in order along the grid's last axis")
+        points = {k: v.reshape(-1, shape[-1], *v.shape[1:]) for k, v in points.items()}
+        function = _solve_path
+    rows, k, n_proc = len(next(iter(points.values()))), jax.process_index(), jax.process_count()
+    first, last = k * rows // n_proc, (k + 1) * rows // n_proc
+    if first == last:
+        raise ValueError(f"{rows} {'paths' if warm_start else 'points'} cannot be split over jax.process_count() = {n_proc}")
+    kernel = Kernel(function, options, shapes, compliance, mesh_for(devices))
+    mine = {name: v[first:last] for name, v in points.items()}
+    return _Plan(kernel, (robot, act, load, gravity_vector(gravity)), mine, shape, axes, 1 + warm_start, first)
+
+
+def _chunks(plan: _Plan, chunk_size, progress) -> Iterator[SweepChunk]:
+    per_row = plan.shape[-1] if plan.lead == 2 else 1
+    k, n_proc = jax.process_index(), jax.process_count()
+    desc = "solving" if n_proc == 1 else f"solving (process {k + 1} of {n_proc})"
+    options = dict(chunk_size=chunk_size, progress=progress, desc=desc, per_point=per_row)
+    for row, out in iter_batched(plan.kernel, plan.base, plan.points, **options):
+        outputs = {name: v.reshape(-1, *v.shape[plan.lead :]) for name, v in out.items()}
+        rows = slice(row, row + len(next(iter(out.values()))))
+        inputs = {name: v[rows].reshape(-1, *v.shape[plan.lead :]) for name, v in plan.points.items()}
+        start = (plan.first + row) * per_row
+        yield SweepChunk(start, start + (rows.stop - row) * per_row, plan.shape, inputs, outputs)
+
+
+def sweep_chunks(robot=None, act=None, load=None, *, chunk_size=None, progress=True, **options) -> Iterator[SweepChunk]:
+    """``sweep``'s results chunk by chunk, each yielded as soon as it is computed, so that host
+    memory holds one chunk's outputs. After ``jax.distributed.initialize`` each process gets the
+    chunks of its own part of the points.
+
+    Args:
+        robot, act, load, chunk_size, progress, **options: as for ``sweep`` (``out`` excepted).
+            Bad input raises here, before the first chunk.
+
+    Returns:
+        An iterator of SweepChunk, in order of ``start``.
+    """
+    return _chunks(_plan(robot, act, load, **options), chunk_size, progress)
+
+
 def sweep(
     robot: Robot | None = None,
     act: Actuation | None = None,
@@ -324,16 +454,17 @@ def sweep(
     warm_start: bool = False,
     shapes: bool = False,
     compliance: bool = False,
-    chunk_size: int = DEFAULT_CHUNK,
+    chunk_size: int | None = None,
     progress: bool = True,
     devices=None,
+    out=None,
     steps: int = STEPS,
     gravity=STANDARD_GRAVITY,
     transition: str = "balanced",
     tendon_model: str = "exact",
     tol: float = TOL,
     max_iter: int = MAX_ITER,
-) -> SweepResult:
+):
     """Solves many configurations at once: ``jax.vmap`` of ``tdct.solve`` in bounded chunks.
 
     Args:
@@ -347,31 +478,160 @@ def sweep(
             neighbour's base wrench; the other axes run in parallel.
         shapes: also return the full shape of every solution (memory: 2 steps + 1 nodes each).
         compliance: also return the exact 3x3 tip compliance (eq. 41) at every point.
-        chunk_size: configurations per compiled call; bounds memory. With several devices each
-            chunk is split evenly over them.
+        chunk_size: configurations per compiled call; bounds device memory. None takes the
+            default of the devices' platform (``CHUNK_SIZES``: cpu 64, gpu 8192). With several
+            devices each chunk is split evenly over them.
         progress: show a progress bar on the terminal.
-        devices: devices to shard each chunk over (default: all of ``jax.devices()``).
+        devices: devices to shard each chunk over (default: this process's, ``jax.local_devices()``).
+        out: an .npz path to stream the results to, chunk by chunk, with host memory bounded by
+            a chunk (uncompressed; same arrays as ``SweepResult.save_npz``). After
+            ``jax.distributed.initialize`` each process solves and writes its own contiguous part
+            of the points, to ``<stem>.partK-of-N.npz``; ``out`` is then required.
+            ``tdct.gather(out)`` reads the result back either way.
         steps, gravity, transition, tendon_model, tol, max_iter: as for ``tdct.solve``.
 
     Returns:
-        SweepResult; check ``converged`` (or ``n_failed``).
+        SweepResult (check ``converged`` or ``n_failed``), or with ``out`` the path written.
     """
-    solver_options(steps, transition, tendon_model, tol, max_iter)
-    robot, act, load, points, shape, axes = prepare(robot, act, load, grid, batch)
-    options = (("steps", steps), ("transition", transition), ("tendon_model", tendon_model), ("tol", tol), ("max_iter", max_iter))
-    g = gravity_vector(gravity)
-    function, per_point = _solve_point, 1
-    if warm_start:
-        if grid is None:
-            raise ValueError("warm_start=True needs grid=: the solves run in order along the grid's last axis")
-        per_point = shape[-1]
-        points = {k: v.reshape(-1, per_point, *v.shape[1:]) for k, v in points.items()}
-        function = _solve_path
-    kernel = Kernel(function, options, shapes, compliance, mesh_for(devices))
-    start = perf_counter()
-    out = run_batched(kernel, (robot, act, load, g), points, chunk_size=chunk_size, progress=progress, per_point=per_point)
-    seconds = perf_counter() - start
-    lead = 1 + warm_start
-    return SweepResult(
-        shape=shape, axes=axes, inputs=unflatten(points, shape, lead), seconds=seconds, **unflatten(out, shape, lead)
+    if out is None and jax.process_count() > 1:
+        raise ValueError(
+            f"out = None: a sweep over jax.process_count() = {jax.process_count()} processes needs out=, "
+            "the .npz path each process writes its part to (tdct.gather(out) joins them)"
+        )
+    plan = _plan(
+        robot,
+        act,
+        load,
+        grid=grid,
+        batch=batch,
+        warm_start=warm_start,
+        shapes=shapes,
+        compliance=compliance,
+        devices=devices,
+        steps=steps,
+        gravity=gravity,
+        transition=transition,
+        tendon_model=tendon_model,
+        tol=tol,
+        max_iter=max_iter,
     )
+    start = perf_counter()
+    chunks = _chunks(plan, chunk_size, progress)
+    if out is not None:
+        return _stream_npz(out, plan, chunks)
+    parts = [c.outputs for c in chunks]
+    outputs = {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
+    inputs = unflatten(plan.points, plan.shape, plan.lead)
+    return SweepResult(plan.shape, plan.axes, inputs, seconds=perf_counter() - start, **unflatten(outputs, plan.shape))
+
+
+def part_path(path, k: int, n: int) -> Path:
+    """Where process k of n writes its part of ``sweep(..., out=path)``: ``<stem>.partK-of-N<suffix>``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.part{k}-of-{n}{path.suffix}")
+
+
+def _stream_npz(path, plan: _Plan, chunks: Iterator[SweepChunk]) -> Path:
+    """Writes each chunk into .npy files (memory-mapped) beside ``path`` as it comes, then stores
+    them in one uncompressed .npz: the whole sweep, or this process's part (flat, with ``points``
+    = [start, stop))."""
+    path, k, n_proc = Path(path), jax.process_index(), jax.process_count()
+    whole = n_proc == 1
+    if not whole:
+        path = part_path(path, k, n_proc)
+    n = len(next(iter(plan.points.values()))) * (plan.shape[-1] if plan.lead == 2 else 1)
+    lead = plan.shape if whole else (n,)
+    with tempfile.TemporaryDirectory(dir=path.parent, prefix=f".{path.name}.") as tmp:
+        files = []
+
+        def save(name, array):
+            files.append(Path(tmp) / f"{name}.npy")
+            np.save(files[-1], array)
+
+        save("shape", np.asarray(plan.shape))
+        for name, v in (plan.axes or {}).items():
+            save(f"axis_{name}", v)
+        for name, v in plan.points.items():
+            save(f"input_{name}", v.reshape(lead + v.shape[plan.lead :]))
+        outputs, first = {}, None
+        for c in chunks:
+            first = c.start if first is None else first
+            for name, v in dict(c.outputs, tip_angle=np.asarray(tip_angle(c.outputs["tip_rotation"]))).items():
+                if name not in outputs:
+                    files.append(Path(tmp) / f"{name}.npy")
+                    outputs[name] = open_memmap(files[-1], mode="w+", dtype=v.dtype, shape=lead + v.shape[1:])
+                outputs[name].reshape(-1, *v.shape[1:])[c.start - first : c.stop - first] = v
+        for v in outputs.values():
+            v.flush()
+        if not whole:
+            save("points", np.asarray([first, first + n]))
+        partial = Path(tmp) / "sweep.npz"
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_STORED) as archive:
+            for f in files:
+                archive.write(f, f.name)
+        os.replace(partial, path)
+    return path
+
+
+def _result(arrays: Mapping) -> SweepResult:
+    """A SweepResult from arrays named as in a sweep's .npz file."""
+    fields = {f.name for f in dataclasses.fields(SweepResult)} - {"shape", "axes", "inputs", "seconds"}
+    axes = {name[5:]: v for name, v in arrays.items() if name.startswith("axis_")}
+    return SweepResult(
+        shape=tuple(int(x) for x in arrays["shape"]),
+        axes=axes or None,
+        inputs={name[6:]: v for name, v in arrays.items() if name.startswith("input_")},
+        **{name: v for name, v in arrays.items() if name in fields},
+    )
+
+
+def gather(path) -> SweepResult:
+    """Reads what ``sweep(..., out=path)`` wrote: the file itself or, after a sweep over N
+    processes, its parts ``<stem>.partK-of-N.npz`` joined in order.
+
+    Returns:
+        SweepResult equal to the one a single-process sweep returns (``seconds`` NaN).
+
+    Raises:
+        ValueError: when neither the file nor its parts are there, or parts are missing, from
+            different sweeps or from sweeps over different process counts.
+    """
+    path = Path(path)
+    if path.exists():
+        with np.load(path) as data:
+            arrays = dict(data)
+        if "points" in arrays:
+            raise ValueError(
+                f"{path} holds one part of a sweep (points {arrays['points'].tolist()}); gather the path given as out="
+            )
+        return _result(arrays)
+    pattern = re.compile(rf"{re.escape(path.stem)}\.part(\d+)-of-(\d+){re.escape(path.suffix)}")
+    found = {tuple(map(int, m.groups())): f for f in path.parent.glob(f"{path.stem}.part*") if (m := pattern.fullmatch(f.name))}
+    counts = sorted({n for _, n in found})
+    if len(counts) != 1:
+        problem = "nor any part" if not counts else f"and its parts come from sweeps over {counts} processes"
+        raise ValueError(f"{path}: no such file, {problem} (<stem>.partK-of-N{path.suffix})")
+    n_proc = counts[0]
+    missing = sorted(set(range(n_proc)) - {k for k, _ in found})
+    if missing:
+        raise ValueError(f"{path}: part(s) {missing} of {n_proc} are missing")
+    parts = []
+    for k in range(n_proc):
+        with np.load(found[k, n_proc]) as data:
+            parts.append(dict(data))
+    shape, stop = tuple(parts[0]["shape"]), 0
+    for k, part in enumerate(parts):
+        start, end = part.pop("points").tolist()
+        if start != stop or tuple(part["shape"]) != shape:
+            raise ValueError(
+                f"{found[k, n_proc]}: points [{start}, {end}) of a sweep of shape {tuple(part['shape'])}, "
+                f"expected points from {stop} of shape {shape}: parts of different sweeps"
+            )
+        stop = end
+    if stop != math.prod(shape):
+        raise ValueError(f"{path}: the parts hold {stop} points, the sweep's shape {shape} has {math.prod(shape)}")
+    joined = {k: v for k, v in parts[0].items() if k == "shape" or k.startswith("axis_")}
+    for k in parts[0].keys() - joined.keys():
+        column = np.concatenate([p[k] for p in parts])
+        joined[k] = column.reshape(shape + column.shape[1:])
+    return _result(joined)

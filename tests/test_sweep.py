@@ -1,4 +1,5 @@
-"""Batched sweeps: equal to one-by-one solves, warm starts, outputs, files, bad input, 2 devices."""
+"""Batched sweeps: equal to one-by-one solves, warm starts, outputs, files, bad input, 2 devices,
+chunks streamed to the caller and to .npz files, parts of a multi-process sweep gathered."""
 
 import json
 import os
@@ -6,6 +7,7 @@ import subprocess
 import sys
 import textwrap
 
+import jax
 import numpy as np
 import pytest
 
@@ -106,3 +108,68 @@ def test_sharded_sweep_on_two_devices_equals_one_device():
     out = json.loads(run.stdout.strip().splitlines()[-1])
     assert out["failed"] == 0
     np.testing.assert_allclose(out["two"], out["one"], rtol=0, atol=1e-15)
+
+
+STREAM = dict(grid=GRID, chunk_size=4, steps=4, progress=False)  # 6 points: a full chunk and a padded one
+
+
+@pytest.fixture(scope="module")
+def small_chunk_sweep(robot):
+    return tdct.sweep(robot, BASE, **STREAM)
+
+
+def assert_same_sweep(a, b):
+    """Every array of two SweepResults equal bit for bit, with the same dtypes."""
+    assert a.shape == b.shape and a.inputs.keys() == b.inputs.keys() and (a.axes or {}).keys() == (b.axes or {}).keys()
+    pairs = [(a.inputs[k], b.inputs[k]) for k in a.inputs] + [(a.axes[k], b.axes[k]) for k in a.axes or {}]
+    pairs += [(getattr(a, f), getattr(b, f)) for f in ("tip_position", "tip_rotation", "converged", "iterations")]
+    pairs += [(getattr(a, f), getattr(b, f)) for f in ("residual_norm", "base_wrench", "s", "position", "compliance")]
+    for x, y in pairs:
+        assert (x is None) == (y is None)
+        if x is not None:
+            assert x.dtype == y.dtype
+            np.testing.assert_array_equal(x, y, strict=True)
+
+
+def test_streamed_npz_equals_the_in_memory_sweep(robot, small_chunk_sweep, tmp_path):
+    path = tdct.sweep(robot, BASE, out=tmp_path / "s.npz", **STREAM)
+    assert path == tmp_path / "s.npz" and sorted(p.name for p in tmp_path.iterdir()) == ["s.npz"]  # no leftovers
+    assert_same_sweep(tdct.gather(path), small_chunk_sweep)
+    streamed, saved = np.load(path), np.load(small_chunk_sweep.save_npz(tmp_path / "saved.npz"))
+    assert sorted(streamed.files) == sorted(saved.files)
+    for k in saved.files:
+        np.testing.assert_array_equal(streamed[k], saved[k], strict=True)
+
+
+def test_chunks_arrive_in_order_and_join_to_the_sweep(robot, small_chunk_sweep):
+    res = small_chunk_sweep
+    chunks = list(tdct.sweep_chunks(robot, BASE, **STREAM))
+    assert [(c.start, c.stop) for c in chunks] == [(0, 4), (4, 6)]
+    for name in ("tip_position", "iterations"):
+        joined = np.concatenate([c.outputs[name] for c in chunks])
+        np.testing.assert_array_equal(joined, getattr(res, name).reshape(joined.shape), strict=True)
+    index = np.unravel_index(np.arange(4, 6), res.shape)  # the second chunk's grid indices
+    np.testing.assert_array_equal(chunks[1].inputs["tip_mass"], GRID["tip_mass"][index[1]])
+    np.testing.assert_array_equal(chunks[1].inputs["insertion"], GRID["insertion"][index[0]])
+
+
+def test_parts_of_a_warm_started_sweep_gather_to_the_whole(robot, tmp_path, monkeypatch):
+    """Two processes, simulated in this one: each writes its paths; gather joins them."""
+    grid = {"tip_mass": np.array([0.0, 0.02, 0.04]), "tensions": np.outer([0.0, 5.0], [1.0, 0.0, 0.0, 0.0])}
+    options = dict(grid=grid, warm_start=True, chunk_size=1, steps=4, progress=False)
+    whole = tdct.sweep(robot, **options)
+    for k in range(2):
+        monkeypatch.setattr(jax, "process_count", lambda: 2)
+        monkeypatch.setattr(jax, "process_index", lambda k=k: k)
+        with pytest.raises(ValueError, match="needs out="):
+            tdct.sweep(robot, **options)
+        assert tdct.sweep(robot, out=tmp_path / "w.npz", **options).name == f"w.part{k}-of-2.npz"
+    monkeypatch.undo()
+    assert_same_sweep(tdct.gather(tmp_path / "w.npz"), whole)
+    with pytest.raises(ValueError, match="holds one part"):
+        tdct.gather(tmp_path / "w.part1-of-2.npz")
+    (tmp_path / "w.part1-of-2.npz").unlink()
+    with pytest.raises(ValueError, match=r"part\(s\) \[1\] of 2 are missing"):
+        tdct.gather(tmp_path / "w.npz")
+    with pytest.raises(ValueError, match="no such file, nor any part"):
+        tdct.gather(tmp_path / "none.npz")
