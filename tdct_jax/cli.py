@@ -3,17 +3,43 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
+import os
 import sys
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .mechanics import compliance, compliance_ellipsoid
 from .robot import SCALAR_FIELDS, Robot
 from .shooting import MAX_ITER, STEPS, TOL, ConvergenceError, raise_if_failed, solve
+
+COMPILE_CACHE_ENV = "TDCT_COMPILE_CACHE"
+"""Environment variable: a folder for the CLI's compilation cache, or 0 / off for none."""
+ON_CPU = ("solve", "compliance", "synth", "calibrate")
+"""Verbs that run on the CPU even where an accelerator is the default: single solves and small
+batches are faster there (each small operation on a GPU is a kernel launch)."""
+
+
+def compile_cache_dir() -> Path | None:
+    """The CLI's persistent XLA compilation cache: $TDCT_COMPILE_CACHE if set (0 or off: none),
+    else $XDG_CACHE_HOME/tdct_jax/xla (XDG_CACHE_HOME defaults to ~/.cache)."""
+    chosen = os.environ.get(COMPILE_CACHE_ENV)
+    if chosen is not None:
+        return None if chosen.strip().lower() in ("", "0", "off") else Path(chosen).expanduser()
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "tdct_jax" / "xla"
+
+
+def enable_compile_cache(path) -> None:
+    """Keeps every compiled XLA program under ``path`` (a folder) and reuses it in later processes,
+    so a second ``tdct reproduce`` skips its compiles. Small and fast compiles are cached too."""
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
 
 
 def _floats(n: int | None = None):
@@ -40,7 +66,13 @@ def _assignment(text: str):
 
 
 def _parser() -> argparse.ArgumentParser:
-    described = argparse.ArgumentParser(add_help=False)
+    cached = argparse.ArgumentParser(add_help=False)
+    cached.add_argument(
+        "--no-compile-cache",
+        action="store_true",
+        help=f"do not read or write the compilation cache (default: {COMPILE_CACHE_ENV} or ~/.cache/tdct_jax/xla)",
+    )
+    described = argparse.ArgumentParser(add_help=False, parents=[cached])
     described.add_argument("--robot", metavar="robot.toml", help="TOML file of Robot fields in SI units")
     described.add_argument(
         "--set",
@@ -73,7 +105,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--csv", metavar="shape.csv", help="save the shape as s_mm,x_mm,y_mm,z_mm")
     c = verbs.add_parser("compliance", parents=[common], help="exact tip compliance matrix (eq. 41) and its ellipsoid")
     c.add_argument("--plot", metavar="ellipse.png", help="save the ellipsoid projected on its two largest axes")
-    r = verbs.add_parser("reproduce", help="regenerate the paper's simulation figures and headline numbers")
+    r = verbs.add_parser("reproduce", parents=[cached], help="regenerate the paper's simulation figures and headline numbers")
     r.add_argument("--out", default="tdct-reproduce", metavar="DIR", help="output folder (default tdct-reproduce)")
     r.add_argument("--quick", action="store_true", help="coarse grids and no parameter fit (about a minute)")
     r.add_argument("--robot", metavar="robot.toml", help="TOML file of Robot fields in SI units")
@@ -255,8 +287,13 @@ def main(argv: list[str] | None = None) -> int:
         "synth": _synth_command,
         "calibrate": _calibrate_command,
     }[args.verb]
+    cache = None if args.no_compile_cache else compile_cache_dir()
+    if cache is not None:
+        enable_compile_cache(cache)
+    on_cpu = args.verb in ON_CPU and jax.default_backend() != "cpu"
     try:
-        return command(args)
+        with jax.default_device(jax.local_devices(backend="cpu")[0]) if on_cpu else contextlib.nullcontext():
+            return command(args)
     except ValueError as e:
         print(f"tdct: error: {e}", file=sys.stderr)
         return 2

@@ -1,9 +1,12 @@
+import os
+
 import jax
 import numpy as np
 import pytest
 
 import tdct_jax as tdct
 
+os.environ["TDCT_COMPILE_CACHE"] = "0"  # tests compile afresh: no persistent cache from the CLI, here or in subprocesses
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
 

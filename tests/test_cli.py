@@ -1,7 +1,12 @@
 """The tdct command line: output matches the API, bad input exits 2, files are written."""
 
 import json
+import os
+import subprocess
+import sys
+import textwrap
 
+import jax
 import numpy as np
 
 import tdct_jax as tdct
@@ -77,3 +82,28 @@ def test_compliance_verb_matches_the_api(capsys, tmp_path, robot):
     assert png.stat().st_size > 10_000
     assert main(["compliance", "--tensions", "8,0,0,0", "--insertion-mm", "50", "--steps", "0"]) == 2
     assert "steps" in capsys.readouterr().err
+
+
+def test_cli_compile_cache_is_on_by_default_and_off_in_tests(tmp_path, monkeypatch):
+    assert main(["solve", "--insertion-mm", "200"]) == 2  # the cache is set up before the input is read
+    assert jax.config.jax_compilation_cache_dir is None  # conftest's TDCT_COMPILE_CACHE=0
+    monkeypatch.setenv("TDCT_COMPILE_CACHE", str(tmp_path / "unused"))
+    assert main(["solve", "--no-compile-cache", "--insertion-mm", "200"]) == 2
+    assert jax.config.jax_compilation_cache_dir is None
+    script = textwrap.dedent(
+        """
+        import jax
+        from tdct_jax.cli import main
+        assert main(["solve", "--insertion-mm", "200"]) == 2
+        print(jax.config.jax_compilation_cache_dir)
+        jax.jit(lambda x: x + 1.0)(1.0)  # a tiny, fast compile: cached too
+        """
+    )
+    env = {k: v for k, v in os.environ.items() if k != "TDCT_COMPILE_CACHE"}
+    run = subprocess.run(
+        [sys.executable, "-c", script], env=dict(env, XDG_CACHE_HOME=str(tmp_path)), capture_output=True, text=True, timeout=120
+    )
+    assert run.returncode == 0, run.stderr[-3000:]
+    cache = tmp_path / "tdct_jax" / "xla"
+    assert run.stdout.split() == [str(cache)]
+    assert any(cache.iterdir())
