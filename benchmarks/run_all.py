@@ -18,7 +18,14 @@ from pathlib import Path
 
 HERE = Path(__file__).parent
 RESULTS = HERE / "results"
-SCRIPTS = ("solve_latency.py", "accuracy_steps.py", "baseline.py", "compliance_autodiff_vs_fd.py", "sweep_throughput.py")
+SCRIPTS = (
+    "solve_latency.py",
+    "accuracy_steps.py",
+    "baseline.py",
+    "compliance_autodiff_vs_fd.py",
+    "sweep_throughput.py",
+    "gpu_throughput.py",  # writes nothing where JAX sees no GPU
+)
 
 
 def _load(name: str, suffix: str) -> dict | None:
@@ -37,6 +44,7 @@ def summary(suffix: str, seconds: dict) -> str:
     lines = [f"# Benchmark summary{' (quick)' if suffix else ''}", ""]
     latency, accuracy, base = _load("latency", suffix), _load("accuracy_steps", suffix), _load("baseline", suffix)
     compliance, sweep = _load("compliance", suffix), _load("sweep_throughput", suffix)
+    gpu = _load("gpu_throughput", suffix)
     errors = {r["steps_per_segment"]: r["max_tip_error_um"] for r in accuracy["rows"]} if accuracy else {}
 
     def accuracy_at(steps) -> str:
@@ -100,6 +108,26 @@ def summary(suffix: str, seconds: dict) -> str:
                 if r["kind"] == "batch"
             ],
         )
+    if gpu:
+        lines += [f"On the GPU ({gpu['device']}, {gpu['date']}, jax {gpu['jax']}, {gpu['steps']} steps):", ""]
+        lines += _table(
+            ("sweep", "points", "lanes per call", "solves/s", "compile", "peak GPU memory", "peak host memory", "failed"),
+            [
+                (
+                    r["kind"],
+                    r["points"],
+                    r["lanes"],
+                    f"{r['solves_per_s']:,.0f}",
+                    f"{r['compile_s']:.1f} s",
+                    "-" if r["peak_device_bytes"] is None else f"{r['peak_device_bytes'] / 2**20:,.0f} MiB",
+                    "-" if r["peak_host_bytes"] is None else f"{r['peak_host_bytes'] / 2**20:,.0f} MiB",
+                    r["failed"],
+                )
+                for r in gpu["rows"]
+            ],
+        )
+        if gpu["cpu_agreement"]:
+            lines += [f"Tips against the CPU's: {gpu['cpu_agreement']['max_tip_difference_m']:.1e} m at most.", ""]
     if seconds:
         lines += ["Script times: " + ", ".join(f"{k} {v:.0f} s" for k, v in seconds.items()), ""]
     return "\n".join(lines)
