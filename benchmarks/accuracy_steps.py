@@ -3,7 +3,8 @@
 For random configurations over the operating envelope (0-10 N on random tendons, 0-160 mm of
 tube, tip forces up to 0.5 N in any direction, gravity on), the tip at each step count is compared
 with a solution 16x finer than the finest step count tested. Beside each error: the warm
-single-solve latency at that step count (the Fig. 6 configuration, median).
+single-solve latency at that step count (the Fig. 6 configuration, median). Last, how far the
+tips move with one more Newton step on the constitutive relations than the default.
 
 Run: python benchmarks/accuracy_steps.py [--quick]
 Writes benchmarks/results/accuracy_steps.json (accuracy_steps_quick.json with --quick).
@@ -15,10 +16,13 @@ import argparse
 import time
 from pathlib import Path
 
+import jax
 import numpy as np
 from _common import timings, write_result
 
 import tdct_jax as tdct
+from tdct_jax import segments
+from tdct_jax.shooting import STEPS
 
 TARGET_M = 1e-6
 """Issue 6: the default step count keeps the tip within 1 micrometre of the converged solution."""
@@ -75,6 +79,16 @@ def main() -> None:
             f"steps {steps:4d} per segment: tip error max {r['max_tip_error_um']:.2e} um, median {r['median_tip_error_um']:.2e} um; "
             f"warm solve {r['solve_median_ms']:.1f} ms"
         )
+    # The constitutive relations take segments.NEWTON_STEPS Newton steps per evaluation: one more
+    # at the default step count shows what stopping there costs in accuracy.
+    default_newton = segments.NEWTON_STEPS
+    by_newton = {}
+    for k in (default_newton + 1, default_newton):
+        segments.NEWTON_STEPS = k
+        jax.clear_caches()
+        by_newton[k] = tips(robot, batch, STEPS)
+    newton_um = float(np.linalg.norm(by_newton[default_newton + 1] - by_newton[default_newton], axis=1).max() * 1e6)
+    print(f"constitutive Newton steps {default_newton} -> {default_newton + 1}: tips move by at most {newton_um:.1e} um")
     ok = [r["steps_per_segment"] for r in rows if r["max_tip_error_um"] * 1e-6 * MARGIN <= TARGET_M]
     recommended = min(ok) if ok else None
     print(f"fewest steps per segment within {TARGET_M * 1e6:g} um / {MARGIN:g} over the envelope: {recommended}")
@@ -86,6 +100,8 @@ def main() -> None:
         target_um=TARGET_M * 1e6,
         margin=MARGIN,
         recommended_steps_per_segment=recommended,
+        constitutive_newton_steps=default_newton,
+        tip_change_with_one_more_constitutive_step_um=newton_um,
         rows=rows,
     )
     print(f"wrote {out}")
