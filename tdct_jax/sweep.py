@@ -184,7 +184,7 @@ def iter_batched(
     kernel: Kernel, base, points: dict, *, chunk_size=None, progress=True, desc="solving", per_point=1
 ) -> Iterator[tuple[int, dict]]:
     """Runs ``kernel`` over the leading axis of ``points`` in chunks, yielding each chunk's
-    (first row, numpy outputs) as soon as it is computed.
+    (first row, numpy outputs) as soon as it is computed, with the next chunk already dispatched.
 
     Every chunk has the same static shape (the last is padded by repeating its final point), so
     one compile serves the whole sweep and any later sweep with the same chunk size.
@@ -199,18 +199,27 @@ def iter_batched(
     chunk = lanes_per_call(n, chunk_size, 1 if kernel.mesh is None else kernel.mesh.size)
     # one device: commit the points to it, so jit runs there and not on the default device
     device = kernel.mesh.devices.flat[0] if kernel.mesh is not None and kernel.mesh.size == 1 else None
+
+    def fetched(start, out):
+        m = min(chunk, n - start)
+        out = {k: v[:m] for k, v in jax.device_get(out).items()}
+        bar.update(m * per_point)
+        bar.set_postfix_str("")
+        return start, out
+
     with tqdm(total=n * per_point, unit="solve", desc=desc, disable=not progress, dynamic_ncols=True) as bar:
+        bar.set_postfix_str("compiling")
+        pending = None
         for start in range(0, n, chunk):
-            bar.set_postfix_str("compiling" if start == 0 else "")
             index = np.minimum(np.arange(start, start + chunk), n - 1)
             chunk_points = {k: v[index] for k, v in points.items()}
             if device is not None:
                 chunk_points = jax.device_put(chunk_points, device)
-            out = jax.device_get(_run_chunk(base, chunk_points, kernel))
-            m = min(chunk, n - start)
-            bar.update(m * per_point)
-            bar.set_postfix_str("")
-            yield start, {k: v[:m] for k, v in out.items()}
+            out = _run_chunk(base, chunk_points, kernel)  # dispatched: runs while the last chunk is fetched
+            if pending is not None:
+                yield fetched(*pending)
+            pending = start, out
+        yield fetched(*pending)
 
 
 def run_batched(kernel: Kernel, base, points: dict, **options) -> dict:
