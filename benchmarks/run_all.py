@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
@@ -19,13 +20,16 @@ from pathlib import Path
 HERE = Path(__file__).parent
 RESULTS = HERE / "results"
 SCRIPTS = (
-    "solve_latency.py",
-    "accuracy_steps.py",
-    "baseline.py",
-    "compliance_autodiff_vs_fd.py",
-    "sweep_throughput.py",
-    "gpu_throughput.py",  # writes nothing where JAX sees no GPU
+    ("solve_latency.py", {}),
+    ("accuracy_steps.py", {}),
+    ("baseline.py", {}),
+    ("compliance_autodiff_vs_fd.py", {}),
+    ("trajectory.py", {}),
+    ("sweep_throughput.py", {}),
+    ("sweep_throughput.py", {"JAX_NUM_CPU_DEVICES": "2"}),  # both cores on one sweep
+    ("gpu_throughput.py", {}),  # writes nothing where JAX sees no GPU
 )
+"""(script, extra environment) in the order they run."""
 
 
 def _load(name: str, suffix: str) -> dict | None:
@@ -44,6 +48,7 @@ def summary(suffix: str, seconds: dict) -> str:
     lines = [f"# Benchmark summary{' (quick)' if suffix else ''}", ""]
     latency, accuracy, base = _load("latency", suffix), _load("accuracy_steps", suffix), _load("baseline", suffix)
     compliance, sweep = _load("compliance", suffix), _load("sweep_throughput", suffix)
+    sweep2, trajectory = _load("sweep_throughput_cpu2", suffix), _load("trajectory", suffix)
     gpu = _load("gpu_throughput", suffix)
     errors = {r["steps_per_segment"]: r["max_tip_error_um"] for r in accuracy["rows"]} if accuracy else {}
 
@@ -99,11 +104,32 @@ def summary(suffix: str, seconds: dict) -> str:
                 for r in compliance["configs"]
             ],
         )
-    if sweep:
+    if trajectory:
         lines += _table(
-            ("batch", f"solves/s (vmap sweep, {sweep['steps']} steps)", "failed", "tip error at this step count"),
+            (f"{trajectory['trajectory_steps']}-step trajectory", "per update", "p90", "Newton iterations", "tip error"),
             [
-                (r["batch"], f"{r['solves_per_s']:.1f}", r["failed"], accuracy_at(sweep["steps"]))
+                (
+                    r["method"],
+                    f"{r['median_ms']:.2f} ms",
+                    "-" if r["p90_ms"] is None else f"{r['p90_ms']:.2f} ms",
+                    f"{r['mean_iterations']:.2f}",
+                    accuracy_at(trajectory["steps_per_segment"]),
+                )
+                for r in trajectory["rows"]
+            ],
+        )
+    if sweep:
+        on_two = {r["batch"]: r["solves_per_s"] for r in sweep2["rows"] if r["kind"] == "batch"} if sweep2 else {}
+        lines += _table(
+            ("batch", "solves/s, 1 CPU device", "solves/s, 2 CPU devices", "failed", "tip error at this step count"),
+            [
+                (
+                    r["batch"],
+                    f"{r['solves_per_s']:.0f}",
+                    f"{on_two[r['batch']]:.0f}" if r["batch"] in on_two else "-",
+                    r["failed"],
+                    accuracy_at(sweep["steps"]),
+                )
                 for r in sweep["rows"]
                 if r["kind"] == "batch"
             ],
@@ -139,13 +165,15 @@ def main() -> int:
     args = parser.parse_args()
     suffix = "_quick" if args.quick else ""
     seconds = {}
-    for script in SCRIPTS:
-        print(f"== {script}", flush=True)
+    for script, env in SCRIPTS:
+        name = " ".join([*(f"{k}={v}" for k, v in env.items()), script])
+        print(f"== {name}", flush=True)
         start = time.perf_counter()
-        done = subprocess.run([sys.executable, str(HERE / script), *(["--quick"] if args.quick else [])], cwd=HERE)
-        seconds[script] = time.perf_counter() - start
+        command = [sys.executable, str(HERE / script), *(["--quick"] if args.quick else [])]
+        done = subprocess.run(command, cwd=HERE, env={**os.environ, **env})
+        seconds[name] = time.perf_counter() - start
         if done.returncode:
-            print(f"run_all: {script} failed with exit code {done.returncode}", file=sys.stderr)
+            print(f"run_all: {name} failed with exit code {done.returncode}", file=sys.stderr)
             return 1
     text = summary(suffix, seconds)
     (RESULTS / f"summary{suffix}.md").write_text(text)

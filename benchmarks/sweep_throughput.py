@@ -1,7 +1,9 @@
 """Sweep throughput: solves per second against batch size and chunk size, with and without warm starts.
 
 Run: python benchmarks/sweep_throughput.py [--quick]
-Writes benchmarks/results/sweep_throughput.json (and _quick.json with --quick). Each figure is
+Writes benchmarks/results/sweep_throughput.json (and _quick.json with --quick). Run with
+JAX_NUM_CPU_DEVICES=K in the environment, JAX splits the CPU into K devices and every chunk is
+sharded over them, so K cores work on a sweep (results in sweep_throughput_cpuK[_quick].json). Each figure is
 the median of ``--repeats`` warm sweeps (compile excluded and reported separately); the envelope
 is random tensions (0-10 N on tendon 1 and 4), insertions (0-160 mm) and tip masses (0-50 g).
 """
@@ -12,6 +14,7 @@ import argparse
 import time
 from pathlib import Path
 
+import jax
 import numpy as np
 from _common import write_result
 
@@ -58,6 +61,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="batches up to 256, two chunk sizes, one repeat")
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
+    devices = jax.device_count()
     repeats = 1 if args.quick else args.repeats
     robot = tdct.Robot()
     batches = (1, 16, 256) if args.quick else (1, 10, 100, 1000, 10000)
@@ -70,7 +74,7 @@ def main() -> None:
         rec = measure(
             lambda b=b: tdct.sweep(robot, batch=envelope(b), progress=False), 1 if b >= 1000 else repeats, first=b < 10000
         )
-        rows.append(dict(kind="batch", batch=b, chunk=lanes_per_call(b, DEFAULT_CHUNK), **rec))
+        rows.append(dict(kind="batch", batch=b, chunk=lanes_per_call(b, DEFAULT_CHUNK, devices), **rec))
         print(rows[-1], flush=True)
     for c in chunks:
         rec = measure(lambda c=c: tdct.sweep(robot, batch=envelope(chunk_batch), chunk_size=c, progress=False), 1)
@@ -84,8 +88,8 @@ def main() -> None:
         chunk = n_paths if warm else lanes_per_call(n_paths * n_steps, DEFAULT_CHUNK)
         rows.append(dict(kind="warm start" if warm else "cold start", batch=n_paths * n_steps, chunk=chunk, **rec))
         print(rows[-1], flush=True)
-    name = "sweep_throughput_quick.json" if args.quick else "sweep_throughput.json"
-    write_result(Path(__file__).parent / "results" / name, steps=STEPS, repeats=repeats, rows=rows)
+    name = f"sweep_throughput{f'_cpu{devices}' if devices > 1 else ''}{'_quick' if args.quick else ''}.json"
+    write_result(Path(__file__).parent / "results" / name, steps=STEPS, repeats=repeats, devices=devices, rows=rows)
     print(f"{'kind':<11} {'batch':>6} {'chunk':>6} {'solves/s':>9} {'first call s':>12} {'iterations':>10} failed")
     for r in rows:
         print(
