@@ -297,7 +297,8 @@ def _assemble(robot, act, opts, ys: State, res, tol, iterations) -> Solution:
     s = jnp.concatenate([jnp.linspace(0.0, 1.0, n_b) * d, d + jnp.linspace(0.0, 1.0, n_b)[1:] * (L - d)])
     in_backbone = jnp.where(jnp.arange(s.size) < n_b, d > 0, d >= L)
 
-    v, u, n, m = jax.vmap(lambda y, b: _node_quantities(back, sil, y, b))(ys, in_backbone)
+    # lax.map: a vmap here, inside a sweep's vmap of 16 or more lanes, deadlocks XLA:CPU (jax 0.10.2).
+    v, u, n, m = lax.map(lambda a: _node_quantities(back, sil, *a), (ys, in_backbone))
     r_norm = jnp.max(jnp.abs(res))
     return Solution(
         s=s,
