@@ -25,6 +25,7 @@ SCRIPTS = (
     ("baseline.py", {}),
     ("compliance_autodiff_vs_fd.py", {}),
     ("trajectory.py", {}),
+    ("peer_pyelastica.py", {}),  # writes nothing without the peer extra
     ("sweep_throughput.py", {}),
     ("sweep_throughput.py", {"JAX_NUM_CPU_DEVICES": "2"}),  # both cores on one sweep
     ("gpu_throughput.py", {}),  # writes nothing where JAX sees no GPU
@@ -49,6 +50,7 @@ def summary(suffix: str, seconds: dict) -> str:
     latency, accuracy, base = _load("latency", suffix), _load("accuracy_steps", suffix), _load("baseline", suffix)
     compliance, sweep = _load("compliance", suffix), _load("sweep_throughput", suffix)
     sweep2, trajectory = _load("sweep_throughput_cpu2", suffix), _load("trajectory", suffix)
+    peer = _load("peer_pyelastica", suffix)
     gpu = _load("gpu_throughput", suffix)
     errors = {r["steps_per_segment"]: r["max_tip_error_um"] for r in accuracy["rows"]} if accuracy else {}
 
@@ -102,6 +104,19 @@ def summary(suffix: str, seconds: dict) -> str:
                     f"{r['best_fd_error']:.1e} rel.",
                 )
                 for r in compliance["configs"]
+            ],
+        )
+    if peer:
+        pe, tj = peer["pyelastica"], peer["tdct_jax"]
+        lines += _table(
+            (f"cantilever, {1e3 * peer['force_N']:g} mN tip force, no gravity", "time", "tip deflection error vs exact"),
+            [
+                (
+                    f"PyElastica {pe['version']}, damped dynamics to 0.1%",
+                    f"{1e3 * pe['best']['time_to_tolerance_s']:.0f} ms",
+                    f"{pe['best']['final_relative_error']:.1e}",
+                ),
+                ("tdct_jax static solve (warm)", f"{tj['median_ms']:.2f} ms", f"{tj['relative_error']:.1e}"),
             ],
         )
     if trajectory:
