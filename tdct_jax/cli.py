@@ -42,6 +42,19 @@ def enable_compile_cache(path) -> None:
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
 
 
+def use_every_cpu_core() -> bool:
+    """Splits the CPU into one JAX device per core, so that sweeps shard their chunks over every
+    core (a JAX_NUM_CPU_DEVICES the user set wins). Possible only before JAX first computes
+    anything; returns whether it took effect."""
+    if "JAX_NUM_CPU_DEVICES" in os.environ:
+        return False
+    try:
+        jax.config.update("jax_num_cpu_devices", os.cpu_count() or 1)
+    except RuntimeError:  # JAX's backends already run (main called from a program that used JAX)
+        return False
+    return True
+
+
 def _floats(n: int | None = None):
     def parse(text: str):
         try:
@@ -287,6 +300,7 @@ def main(argv: list[str] | None = None) -> int:
         "synth": _synth_command,
         "calibrate": _calibrate_command,
     }[args.verb]
+    use_every_cpu_core()
     cache = None if args.no_compile_cache else compile_cache_dir()
     if cache is not None:
         enable_compile_cache(cache)

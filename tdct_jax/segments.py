@@ -27,12 +27,13 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 
 from .linalg import solve_spd
 from .so3 import hat
 
-E3 = jnp.array([0.0, 0.0, 1.0])
+E3 = np.array([0.0, 0.0, 1.0])
 
 
 class State(NamedTuple):

@@ -42,8 +42,8 @@ from .so3 import tip_angle
 CHUNK_SIZES = {"cpu": 64, "gpu": 8192}
 """Default configurations per compiled call, by device platform (``chunk_size=`` overrides; a
 smaller sweep rounds up to a power of two; other platforms take the cpu value). cpu: 64 measured
-fastest on the 2-core CPU (36 solves/s against 21-25 at 16, 256 and 1024;
-benchmarks/sweep_throughput.py). gpu: provisional, near the best batch of a batch-last prototype
+fastest on one device of the 2-core CPU (664 solves/s against 569, 650 and 440 at 16, 256 and
+1,024; benchmarks/sweep_throughput.py). gpu: provisional, near the best batch of a batch-last prototype
 on one H100 (874,000 solves/s at 10,000 lanes, 2-8x less at 10^5-10^6; ../shared/perf-notes.md),
 to be replaced by what benchmarks/gpu_throughput.py measures."""
 DEFAULT_CHUNK = CHUNK_SIZES["cpu"]

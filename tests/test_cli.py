@@ -84,7 +84,7 @@ def test_compliance_verb_matches_the_api(capsys, tmp_path, robot):
     assert "steps" in capsys.readouterr().err
 
 
-def test_cli_compile_cache_is_on_by_default_and_off_in_tests(tmp_path, monkeypatch):
+def test_cli_compile_cache_is_on_by_default_and_off_in_tests_and_sweeps_get_every_core(tmp_path, monkeypatch):
     assert main(["solve", "--insertion-mm", "200"]) == 2  # the cache is set up before the input is read
     assert jax.config.jax_compilation_cache_dir is None  # conftest's TDCT_COMPILE_CACHE=0
     monkeypatch.setenv("TDCT_COMPILE_CACHE", str(tmp_path / "unused"))
@@ -97,13 +97,14 @@ def test_cli_compile_cache_is_on_by_default_and_off_in_tests(tmp_path, monkeypat
         assert main(["solve", "--insertion-mm", "200"]) == 2
         print(jax.config.jax_compilation_cache_dir)
         jax.jit(lambda x: x + 1.0)(1.0)  # a tiny, fast compile: cached too
+        print(jax.device_count())
         """
     )
-    env = {k: v for k, v in os.environ.items() if k != "TDCT_COMPILE_CACHE"}
+    env = {k: v for k, v in os.environ.items() if k not in ("TDCT_COMPILE_CACHE", "JAX_NUM_CPU_DEVICES")}
     run = subprocess.run(
         [sys.executable, "-c", script], env=dict(env, XDG_CACHE_HOME=str(tmp_path)), capture_output=True, text=True, timeout=120
     )
     assert run.returncode == 0, run.stderr[-3000:]
     cache = tmp_path / "tdct_jax" / "xla"
-    assert run.stdout.split() == [str(cache)]
+    assert run.stdout.split() == [str(cache), str(os.cpu_count())]  # one CPU device per core
     assert any(cache.iterdir())
