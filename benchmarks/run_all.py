@@ -136,12 +136,20 @@ def summary(suffix: str, seconds: dict) -> str:
     if sweep:
         on_two = {r["batch"]: r["solves_per_s"] for r in sweep2["rows"] if r["kind"] == "batch"} if sweep2 else {}
         lines += _table(
-            ("batch", "solves/s, 1 CPU device", "solves/s, 2 CPU devices", "failed", "tip error at this step count"),
+            (
+                "batch",
+                "solves/s, 1 CPU device",
+                "solves/s, 2 CPU devices",
+                "peak memory",
+                "failed",
+                "tip error at this step count",
+            ),
             [
                 (
                     r["batch"],
                     f"{r['solves_per_s']:.0f}",
                     f"{on_two[r['batch']]:.0f}" if r["batch"] in on_two else "-",
+                    f"{r['peak_rss_mb']:.0f} MB" if "peak_rss_mb" in r else "-",
                     r["failed"],
                     accuracy_at(sweep["steps"]),
                 )

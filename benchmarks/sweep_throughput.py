@@ -6,11 +6,13 @@ JAX_NUM_CPU_DEVICES=K in the environment, JAX splits the CPU into K devices and 
 sharded over them, so K cores work on a sweep (results in sweep_throughput_cpuK[_quick].json). Each figure is
 the median of ``--repeats`` warm sweeps (compile excluded and reported separately); the envelope
 is random tensions (0-10 N on tendon 1 and 4), insertions (0-160 mm) and tip masses (0-50 g).
+Each row also records the process's peak resident memory so far (batches run smallest first).
 """
 
 from __future__ import annotations
 
 import argparse
+import resource
 import time
 from pathlib import Path
 
@@ -53,6 +55,7 @@ def measure(run, repeats: int, first: bool = True) -> dict:
         solves_per_s=n / median,
         failed=failed,
         newton_iterations=int(res.iterations.sum()),
+        peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,  # the process's, so far
     )
 
 
