@@ -1,67 +1,31 @@
 """Peer: PyElastica's damped dynamics against tdct_jax's static solve on a tip-loaded cantilever.
 
-The problem is the default tdct_jax.Robot() as a plain silicone cantilever: no tube (insertion 0),
-no tendon tension, no gravity, clamped at s = 0 with axis +z, and a small tip force F = 5 mN along
--y. The reference ("exact") tip deflection is the closed form of the continuum model both codes
-discretise (an extensible, shearable Cosserat rod with stiffnesses K_se = (GA, GA, EA) and
-K_bt = (E I_x, E I_y, G (I_x + I_y)), no shear coefficient, as in tdct_jax) in its small-deflection
-limit, the Timoshenko cantilever:
+Problem: the default tdct_jax.Robot() as a plain silicone cantilever (no tube, no tension, no
+gravity) with a 5 mN tip force along -y. Reference: the small-deflection closed form of the rod
+both codes discretise (extensible, shearable, no shear coefficient), the Timoshenko cantilever
+delta = F L^3 / (3 E I_x) + F L / (G A); the script raises if tdct_jax differs from it by more
+than 1e-4 (the geometric nonlinearity at this load is 4e-5).
 
-    delta = F L^3 / (3 E I_x) + F L / (G A)
+PyElastica (optional extra "peer"; without it the script says so and exits 0): a
+CosseratRod.straight_rod of N_ELEMENTS elements with tdct_jax's area and density, and its
+shear_matrix and bend_matrix overwritten with tdct_jax's diag(GA, GA, EA) and
+diag(E I_x, E I_y, G (I_x + I_y)); OneEndFixedBC, EndpointForces, AnalyticalLinearDamper,
+PositionVerlet at CFL of the axial-wave limit. OneEndFixedBC clamps the whole first element, which
+acts as a clamp at its centre and leaves a plain rod 1.5 / n too soft (2.96% at 50 elements), so
+the rod is dx / 2 longer and starts at z = -dx / 2 (the plain clamp is run once and reported).
+The damping constant is scanned around the critical damping 2 omega_1 of the first bending mode
+and the fastest reported: the peer's best case. "Time to 0.1%" is the stepping wall time until
+the tip stays within 0.1% of the exact deflection for the rest of the run, an oracle criterion that
+favours the peer. numba compiles into a fresh NUMBA_CACHE_DIR (unless set) in a warm-up run,
+reported apart, as is the setup.
 
-with L, E, G, A, I_x the tdct_jax Robot's length, E_silicone, G_silicone, area_silicone and
-second_moments_silicone[0] (a force along -y bends about body x, the stiffness E I_x; here
-I_x = I_y). At 5 mN (delta / L = 0.65%) the geometric nonlinearity that tdct_jax keeps is 4e-5 of
-delta; the script raises if tdct_jax and the closed form differ by more than 1e-4, so the exact
-value is exact to well within the 0.1% tolerance.
-
-PyElastica side (an optional extra: without ``import elastica`` the script says so and exits 0,
-writing nothing): a CosseratRod.straight_rod of N_ELEMENTS elements with base_radius
-sqrt(A / pi), so that its area, mass per length (density_silicone) and axial stiffness match the
-silicone section, and then its shear_matrix and bend_matrix overwritten in place before finalize
-with exactly tdct_jax's diag(GA, GA, EA) and diag(E I_x, E I_y, G (I_x + I_y)) (PyElastica's
-defaults would add a 27/28 shear coefficient and take I from the full disc). Only the rotary
-inertia stays PyElastica's (of the full disc); it changes the dynamics, not the static answer.
-OneEndFixedBC clamps node 0 and the directors of element 0, EndpointForces applies F at the tip
-node (a step load: ramp over one time step), AnalyticalLinearDamper with a uniform damping constant
-gamma damps every velocity, and PositionVerlet steps with dt = 0.8 of the axial-wave limit
-dx / sqrt(E / rho) (dt of 0.91 of it was still stable, 0.98 was not).
-
-The clamp. PyElastica's OneEndFixedBC fixes the directors of the whole first element, and the
-discrete curvatures live at the Voronoi points between elements, so the clamped rotation acts as if
-at the centre of element 0, dx / 2 from the clamped node (the base rotation over that half element,
-M(0) dx / 2 / EI, is missing): a rod of length L with n elements settles to a deflection low by
-1.5 / n (measured 2.96% at 50 elements, 1.49% at 100, 5.9% at 25; first order, so 0.1% would take
-about 1,500 elements and over 100,000 time steps). The benchmark therefore places the clamp at the
-centre of element 0, as a staggered grid wants: the rod is L + dx / 2 long, with dx = L / (n - 1/2),
-and starts at z = -dx / 2, so the free length from the clamp plane z = 0 to the loaded tip is L.
-That settles within 6e-5 of the exact value at 50 elements (2.8e-4 at 25). The plain clamp is run
-once as well and its settled error is reported ("plain_clamp").
-
-Damping. gamma is set relative to twice the first bending eigenfrequency of the Euler-Bernoulli
-cantilever, omega_1 = 1.8751^2 sqrt(E I_x / (rho A L^4)) (about 15 rad/s), the critical damping of
-mode 1; the full run scans several multiples and reports each and the fastest, which is the peer's
-best case (chosen knowing the answer). Time to 0.1% is the wall time of the stepping loop, from
-the first step to the first check after which the tip deflection stays within 0.1% of the exact
-value until the end of the run (SIM_TIME of simulated time, at least twice the settling time);
-checks read the tip every CHECK_EVERY steps. It is an oracle criterion (a real run does not know
-the answer and would stop later, on a velocity or residual tolerance), so it favours the peer.
-The simulator's construction and finalize are timed apart (setup), and the first run in the
-process, which compiles PyElastica's numba kernels, is a separate warm-up that is reported (as
-import and first-run seconds) and not counted. numba would otherwise load the kernels from its
-on-disk cache after the first run since the install (about 0.4 s instead of about 20 s), so the
-script compiles into a fresh temporary NUMBA_CACHE_DIR, removed at the end, unless
-NUMBA_CACHE_DIR is set.
-
-tdct_jax side, in the same process: compile and first solve, then the median (and p90) of warm
-tdct.solve calls at the default steps, waited for with block_until_ready (_common.timings), and its
-tip error against the same exact value. The ratio is PyElastica's time to 0.1% (best gamma,
-stepping only) over tdct_jax's median warm solve; with setup added it is also reported.
+tdct_jax, in the same process: compile and first solve, the median and p90 of warm solves at the
+default steps, and the tip error against the same reference. The ratio is PyElastica's time to
+0.1% over tdct_jax's median warm solve.
 
 Run: PYTHONPATH=. python benchmarks/peer_pyelastica.py [--quick] [--out PATH]
 Writes benchmarks/results/peer_pyelastica.json (--quick: peer_pyelastica_quick.json; one damping
-constant, fewer repeats). Needs the extra: pip install pyelastica (or ".[peer]"). Timings are
-wall-clock on a shared machine; for steadier numbers pin to one core: taskset -c 0.
+constant, fewer repeats). Needs the extra: pip install -e ".[peer]".
 """
 
 from __future__ import annotations
