@@ -4,7 +4,7 @@ For random configurations over the operating envelope (0-10 N on random tendons,
 tube, tip forces up to 0.5 N in any direction, gravity on), the tip at each step count is compared
 with a solution 16x finer than the finest step count tested. Beside each error: the warm
 single-solve latency at that step count (the Fig. 6 configuration, median). Last, how far the
-tips move with one more Newton step on the constitutive relations than the default.
+tips move with one more Newton step on the constitutive relations than the default (full run only).
 
 Run: python benchmarks/accuracy_steps.py [--quick]
 Writes benchmarks/results/accuracy_steps.json (accuracy_steps_quick.json with --quick).
@@ -45,6 +45,20 @@ def tips(robot, batch, steps):
     return res.tip_position
 
 
+def constitutive_newton_effect(robot, batch) -> float:
+    """How far [um] the tips move with one more Newton step on the constitutive relations than the
+    default segments.NEWTON_STEPS, at the default step count (two recompiles)."""
+    default = segments.NEWTON_STEPS
+    by_newton = {}
+    for k in (default + 1, default):  # ends on the default
+        segments.NEWTON_STEPS = k
+        jax.clear_caches()
+        by_newton[k] = tips(robot, batch, STEPS)
+    um = float(np.linalg.norm(by_newton[default + 1] - by_newton[default], axis=1).max() * 1e6)
+    print(f"constitutive Newton steps {default} -> {default + 1}: tips move by at most {um:.1e} um")
+    return um
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="8 configurations, steps 8..50, fewer repeats")
@@ -79,16 +93,7 @@ def main() -> None:
             f"steps {steps:4d} per segment: tip error max {r['max_tip_error_um']:.2e} um, median {r['median_tip_error_um']:.2e} um; "
             f"warm solve {r['solve_median_ms']:.1f} ms"
         )
-    # The constitutive relations take segments.NEWTON_STEPS Newton steps per evaluation: one more
-    # at the default step count shows what stopping there costs in accuracy.
-    default_newton = segments.NEWTON_STEPS
-    by_newton = {}
-    for k in (default_newton + 1, default_newton):
-        segments.NEWTON_STEPS = k
-        jax.clear_caches()
-        by_newton[k] = tips(robot, batch, STEPS)
-    newton_um = float(np.linalg.norm(by_newton[default_newton + 1] - by_newton[default_newton], axis=1).max() * 1e6)
-    print(f"constitutive Newton steps {default_newton} -> {default_newton + 1}: tips move by at most {newton_um:.1e} um")
+    newton_um = None if args.quick else constitutive_newton_effect(robot, batch)
     ok = [r["steps_per_segment"] for r in rows if r["max_tip_error_um"] * 1e-6 * MARGIN <= TARGET_M]
     recommended = min(ok) if ok else None
     print(f"fewest steps per segment within {TARGET_M * 1e6:g} um / {MARGIN:g} over the envelope: {recommended}")
@@ -100,7 +105,7 @@ def main() -> None:
         target_um=TARGET_M * 1e6,
         margin=MARGIN,
         recommended_steps_per_segment=recommended,
-        constitutive_newton_steps=default_newton,
+        constitutive_newton_steps=segments.NEWTON_STEPS,
         tip_change_with_one_more_constitutive_step_um=newton_um,
         rows=rows,
     )
