@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -202,7 +203,7 @@ def _newton(F, x0, tol, max_iter):
     J0 = jax.tree.map(lambda o: jnp.zeros(jnp.shape(o) + (n,)), jax.eval_shape(F, x0))
     init = (x0, jnp.full(n, jnp.inf), J0, jnp.asarray(1e-5), 0, x0)
     x, r, J, _, it, _ = lax.while_loop(not_done, body, init)
-    return x, (r, (it - 1).astype(x.dtype), J)  # float: custom_root's aux must take float tangents
+    return x, (r, (it - 1).astype(x.dtype), J)  # float: the root's aux takes (zero) float tangents
 
 
 STAGES = (1, 4, 16)
@@ -238,18 +239,13 @@ def _continuation(F_at, x0, x_straight, tol, max_iter):
     return x, (r, it, J)
 
 
-def _tangent_solve(g, y):
-    return jnp.linalg.solve(jax.jacfwd(g)(y), y)
-
-
-@jax.jit(static_argnames=("opts",))
-def shoot(robot, act, load, gravity, tol, max_iter, guess, opts: SolverOptions) -> tuple[Solution, jax.Array]:
-    """The compiled solve: the Solution, and the 6x6 tip compliance d(tip position, tip rotation
-    vector) / d(F_e, M_e) (eq. 41) from Newton's Jacobians at the root, for one 6x6 solve more.
-
-    The compliance is exact in value but has no derivatives of its own (``tdct.compliance``
-    supplies them). Unchecked: ``solve_arguments`` checks the arguments.
-    """
+# The root's differentiable inputs (robot, act, load, gravity) travel as their leaves: custom_jvp
+# builds zero tangents by unflattening, and a Robot of zeros would fail the Robot's own checks.
+@functools.partial(jax.custom_jvp, nondiff_argnums=(4, 5))
+def _root(leaves, tol, max_iter, guess, tree, opts: SolverOptions):
+    """The scaled base unknowns x with a zero tip residual, and (Newton steps, Newton's last
+    Jacobians: d residual / dx and d(tip p, tip R) / dx, taken at x)."""
+    robot, act, load, gravity = jax.tree.unflatten(tree, leaves)
     F_c = _scale(robot, act, load, gravity)
     x_straight = _straight_guess(robot, act, load, gravity, F_c)
     x_warm = jnp.concatenate([guess[:3] / F_c, guess[3:] / (F_c * robot.length)])
@@ -265,12 +261,52 @@ def shoot(robot, act, load, gravity, tol, max_iter, guess, opts: SolverOptions) 
 
         return F
 
-    def solve_root(F, x0):
-        return _continuation(F_at, x0, x_straight, tol, max_iter)
+    x, (_, iterations, J) = _continuation(F_at, x0, x_straight, tol, max_iter)
+    return x, (iterations, J)
 
-    x, (_, iterations, (J_res, (J_p, J_R))) = lax.custom_root(
-        lambda x: F_at(1.0)(x)[0], x0, solve_root, _tangent_solve, has_aux=True
-    )
+
+def _residual(leaves, x, tree, opts):
+    robot, act, load, gravity = jax.tree.unflatten(tree, leaves)
+    return _integrate(robot, act, load, gravity, opts, x, _scale(robot, act, load, gravity))[0]
+
+
+@_root.defjvp
+def _root_jvp(tree, opts, primals, tangents):
+    """Implicit differentiation: dx = -J^-1 (d residual / d inputs) d inputs, with Newton's J."""
+    leaves, tol, max_iter, guess = primals
+    x, aux = _root(leaves, tol, max_iter, guess, tree, opts)
+    J = _jacobian_at_root(leaves, x, aux[1][0], tree, opts)
+    _, dF = jax.jvp(lambda leaves: _residual(leaves, x, tree, opts), (leaves,), (tangents[0],))
+    return (x, aux), (-jnp.linalg.solve(J, dF), jax.tree.map(jnp.zeros_like, aux))
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(3, 4))
+def _jacobian_at_root(leaves, x, J, tree, opts):
+    """J, Newton's d residual / dx at x, free; its own derivatives (second order) by autodiff."""
+    return J
+
+
+@_jacobian_at_root.defjvp
+def _jacobian_at_root_jvp(tree, opts, primals, tangents):
+    leaves, x, J = primals
+
+    def jacobian(leaves, x):
+        return jax.jacfwd(lambda x: _residual(leaves, x, tree, opts))(x)
+
+    return J, jax.jvp(jacobian, (leaves, x), tangents[:2])[1]
+
+
+@jax.jit(static_argnames=("opts",))
+def shoot(robot, act, load, gravity, tol, max_iter, guess, opts: SolverOptions) -> tuple[Solution, jax.Array]:
+    """The compiled solve: the Solution, and the 6x6 tip compliance d(tip position, tip rotation
+    vector) / d(F_e, M_e) (eq. 41) from Newton's Jacobians at the root, for one 6x6 solve more.
+
+    The compliance is exact in value but has no derivatives of its own (``tdct.compliance``
+    supplies them). Unchecked: ``solve_arguments`` checks the arguments.
+    """
+    leaves, tree = jax.tree.flatten((robot, act, load, gravity))
+    x, (iterations, (J_res, (J_p, J_R))) = _root(leaves, tol, max_iter, guess, tree, opts)
+    F_c = _scale(robot, act, load, gravity)
     res, ys = _integrate(robot, act, load, gravity, opts, x, F_c, path=True)
     sol = _assemble(robot, act, opts, ys, res, tol, iterations.astype(jnp.int32))
     # The tip load enters only the residual: d res / d(F_e, M_e) = -diag(1 / F_c, 1 / (F_c L)).
