@@ -87,17 +87,37 @@ def _compliance_from_root(leaves, tree, opts):
 @_compliance_from_root.defjvp
 def _compliance_jvp(tree, opts, primals, tangents):
     """Derivatives of the compliance: forward-mode autodiff of the compliance's own autodiff."""
+    return jax.jvp(lambda leaves: _pose_jacobian_of(leaves, tree, opts, "load"), primals, tangents)
 
-    def by_autodiff(leaves):
-        robot, act, load, *rest = jax.tree.unflatten(tree, leaves)
 
-        def solve_at(w):
-            return shoot(robot, act, TipLoad(w[:3], w[3:]), *rest, opts)[0]
+def _pose_jacobian_of(leaves, tree, opts, wrt):
+    """(d(tip pose) / dw, Solution) for w the tip load ("load"), the actuation ("actuation") or a
+    tuple of scalar Robot field names, at the solve arguments given as leaves of ``tree``."""
+    robot, act, load, *rest = jax.tree.unflatten(tree, leaves)
 
+    def configure(w):
+        if wrt == "load":
+            return robot, act, TipLoad(w[:3], w[3:])
+        if wrt == "actuation":
+            return robot, Actuation(w[:-1], w[-1]), load
+        return dataclasses.replace(robot, **dict(zip(wrt, w, strict=True))), act, load
+
+    if wrt == "load":
         w = jnp.concatenate([jnp.asarray(load.force), jnp.asarray(load.moment)])
-        return _tip_pose_jacobian(solve_at, w)
+    elif wrt == "actuation":
+        w = jnp.concatenate([jnp.asarray(act.tensions), jnp.reshape(jnp.asarray(act.insertion), (1,))])
+    else:
+        w = jnp.stack([jnp.asarray(getattr(robot, p)) for p in wrt])
+    return _tip_pose_jacobian(lambda w: shoot(*configure(w), *rest, opts)[0], w)
 
-    return jax.jvp(by_autodiff, primals, tangents)
+
+_pose_jacobian = jax.jit(_pose_jacobian_of, static_argnums=(1, 2, 3))
+
+
+def _jacobian(robot, act, load, wrt, throw, solve_options):
+    args, opts = solve_arguments(robot, act, load, **solve_options)
+    leaves, tree = jax.tree.flatten(args)
+    return _checked(*_pose_jacobian(leaves, tree, opts, wrt), throw, solve_options)[0]
 
 
 def kinematic_jacobian(robot: Robot, act: Actuation, load: TipLoad | None = None, *, throw: bool = True, **solve_options):
@@ -106,13 +126,7 @@ def kinematic_jacobian(robot: Robot, act: Actuation, load: TipLoad | None = None
     The last column is the tube insertion depth, a real differentiable input (one-sided at d = 0
     and d = L, where the solution extends smoothly). Arguments as for ``compliance``.
     """
-    load = TipLoad() if load is None else load
-
-    def solve_at(w):
-        return solve(robot, Actuation(w[:-1], w[-1]), load, **solve_options)
-
-    w = jnp.concatenate([jnp.asarray(act.tensions), jnp.reshape(jnp.asarray(act.insertion), (1,))])
-    return _checked(*_tip_pose_jacobian(solve_at, w), throw, solve_options)[0]
+    return _jacobian(robot, act, load, "actuation", throw, solve_options)
 
 
 def parameter_jacobian(
@@ -122,16 +136,10 @@ def parameter_jacobian(
 
     Units follow the fields (e.g. m/Pa for E_silicone). Arguments as for ``compliance``.
     """
-    load = TipLoad() if load is None else load
     for p in params:
         if p not in SCALAR_FIELDS:
             raise ValueError(f"params: {p!r} is not a scalar Robot field; allowed: {list(SCALAR_FIELDS)}")
-
-    def solve_at(w):
-        return solve(dataclasses.replace(robot, **{p: w[i] for i, p in enumerate(params)}), act, load, **solve_options)
-
-    w = jnp.stack([jnp.asarray(getattr(robot, p)) for p in params])
-    return _checked(*_tip_pose_jacobian(solve_at, w), throw, solve_options)[0]
+    return _jacobian(robot, act, load, tuple(params), throw, solve_options)
 
 
 def finite_difference_compliance(
