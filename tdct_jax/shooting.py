@@ -431,7 +431,18 @@ def solve_arguments(
     load = TipLoad() if load is None else load
     guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
     check_inputs(robot, act, load)
-    return (robot, act, load, gravity_vector(gravity), tol, max_iter, guess), opts
+    gravity, guess = _on_cpu(gravity_vector(gravity), guess)
+    return (robot, act, load, gravity, tol, max_iter, guess), opts
+
+
+def _on_cpu(*arrays):
+    """The arrays committed to the CPU where another backend (a GPU) is the default, so that the
+    solve they enter runs there (jit runs where its committed arguments are; the pytrees' numpy
+    leaves follow). One solve is a long chain of small operations, each a kernel launch on a GPU,
+    and faster on the CPU. Traced arrays (the caller's jit or vmap, and so sweeps) stay as they are."""
+    if jax.default_backend() == "cpu" or not all(is_concrete(a) for a in arrays):
+        return arrays
+    return jax.device_put(arrays, jax.local_devices(backend="cpu")[0])
 
 
 def gravity_vector(gravity):

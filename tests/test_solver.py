@@ -76,3 +76,18 @@ def test_unrolled_spd_solve_matches_lapack_on_a_batch():
     b = rng.normal(size=(50, 6))
     x = np.asarray(jax.jit(solve_spd)(A, b))
     assert rel_err(x, np.linalg.solve(A, b[..., None])[..., 0]) < 1e-9
+
+
+def test_single_solves_go_to_the_cpu_where_a_gpu_is_the_default(robot, monkeypatch):
+    from tdct_jax import shooting
+
+    cpu, put = jax.local_devices(backend="cpu")[0], []
+    real_put = jax.device_put
+    monkeypatch.setattr(shooting.jax, "device_put", lambda x, device: put.append(device) or real_put(x, device))
+    args, _ = shooting.solve_arguments(robot, tdct.Actuation())
+    assert put == []  # the CPU is the default: nothing to move
+    monkeypatch.setattr(shooting.jax, "default_backend", lambda: "gpu")
+    args, _ = shooting.solve_arguments(robot, tdct.Actuation())
+    assert put == [cpu] and args[3].devices() == {cpu}  # gravity: jit runs where committed arguments are
+    jax.jit(lambda g: shooting.solve_arguments(robot, tdct.Actuation(), gravity=g)[0][3])(np.zeros(3))
+    assert put == [cpu]  # traced arguments (jit, vmap, sweeps) stay where they are
