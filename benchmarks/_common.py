@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import platform
+import resource
 import time
 from pathlib import Path
 
@@ -20,6 +21,11 @@ def timings(f, repeats: int) -> np.ndarray:
         jax.block_until_ready(f())
         times.append(time.perf_counter() - t)
     return np.array(times)
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory so far [MB] (Linux reports ru_maxrss in KiB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def write_result(path: str | Path, **fields) -> None:

@@ -12,13 +12,12 @@ Each row also records the process's peak resident memory so far (batches run sma
 from __future__ import annotations
 
 import argparse
-import resource
 import time
 from pathlib import Path
 
 import jax
 import numpy as np
-from _common import write_result
+from _common import peak_rss_mb, write_result
 
 import tdct_jax as tdct
 from tdct_jax.shooting import STEPS
@@ -55,7 +54,7 @@ def measure(run, repeats: int, first: bool = True) -> dict:
         solves_per_s=n / median,
         failed=failed,
         newton_iterations=int(res.iterations.sum()),
-        peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,  # the process's, so far
+        peak_rss_mb=peak_rss_mb(),  # the process's, so far
     )
 
 

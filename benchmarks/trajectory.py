@@ -4,7 +4,8 @@ A 1,000-step trajectory (tendons 1 and 4 and the insertion moving smoothly, 20 g
 solved three ways: a Python control loop calling ``tdct.solve`` with each step's ``guess`` set to
 the last base wrench (what a controller written in Python does), the same loop from the straight
 rod each time (cold), and the whole trajectory inside one compiled ``lax.scan``
-(as ``tdct.sweep(..., warm_start=True)`` does along a grid axis; no Python between steps). Reports the latency per update
+(``tdct.sweep``'s warm-start kernel, as ``warm_start=True`` runs it along a grid axis; no
+Python between steps). Reports the latency per update
 (median and p90 for the loops, mean for the scan), Newton iterations and peak memory.
 
 Run: python benchmarks/trajectory.py [--quick]
@@ -14,18 +15,16 @@ Writes benchmarks/results/trajectory.json (trajectory_quick.json with --quick: 2
 from __future__ import annotations
 
 import argparse
-import resource
 import time
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
-from _common import write_result
-from jax import lax
+from _common import peak_rss_mb, write_result
 
 import tdct_jax as tdct
-from tdct_jax.shooting import STEPS
+from tdct_jax.shooting import MAX_ITER, STEPS, TOL, gravity_vector
+from tdct_jax.sweep import Kernel, _solve_path, run_batched
 
 
 def trajectory(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -54,21 +53,17 @@ def control_loop(robot, tensions, insertions, load, warm: bool):
 
 
 def compiled_path(robot, load):
-    """The trajectory in one compiled scan, each solve started from the last converged one."""
+    """The trajectory as one warm-started path of ``sweep``'s kernel (one compiled scan, each solve
+    started from the last converged one): (tips, Newton iterations, converged) per step."""
+    options = (("steps", STEPS), ("transition", "balanced"), ("tendon_model", "exact"), ("tol", TOL), ("max_iter", MAX_ITER))
+    kernel = Kernel(_solve_path, options)
+    base = (robot, tdct.Actuation(), load, gravity_vector(tdct.STANDARD_GRAVITY))
 
-    @jax.jit
     def path(tensions, insertions):
-        def step(guess, x):
-            sol = tdct.solve(robot, tdct.Actuation(*x), load, guess=guess)
-            return jnp.where(sol.converged, sol.base_wrench, guess), (sol.tip_position, sol.iterations, sol.converged)
-
-        return lax.scan(step, jnp.full(6, jnp.nan), (tensions, insertions))[1]
+        out = run_batched(kernel, base, {"tensions": tensions[None], "insertion": insertions[None]}, progress=False)
+        return out["tip_position"][0], out["iterations"][0], out["converged"][0]
 
     return path
-
-
-def peak_rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def main() -> None:
@@ -95,9 +90,9 @@ def main() -> None:
         print(rows[-1], flush=True)
 
     scan = compiled_path(robot, load)
-    jax.block_until_ready(scan(tensions, insertions))
+    scan(tensions, insertions)
     t = time.perf_counter()
-    scan_tips, scan_iterations, converged = jax.block_until_ready(scan(tensions, insertions))
+    scan_tips, scan_iterations, converged = scan(tensions, insertions)
     scan_s = time.perf_counter() - t
     if not np.all(converged):
         raise RuntimeError("the compiled path did not converge everywhere")

@@ -66,9 +66,14 @@ def compliance(
 
 def compliance_and_solution(robot: Robot, act: Actuation, load: TipLoad | None = None, *, throw: bool = True, **solve_options):
     """The 6x6 compliance of ``compliance(..., full=True)`` and the Solution it was taken at, in one solve."""
+    return _checked_call(_compliance, robot, act, load, throw, solve_options)
+
+
+def _checked_call(f, robot, act, load, throw, solve_options, *static):
+    """``_checked`` of f(leaves, tree, opts, *static) at the checked arguments of ``solve``."""
     args, opts = solve_arguments(robot, act, load, **solve_options)
     leaves, tree = jax.tree.flatten(args)
-    return _checked(*_compliance(leaves, tree, opts), throw, solve_options)
+    return _checked(*f(leaves, tree, opts, *static), throw, solve_options)
 
 
 # The pytrees travel as their leaves: custom_jvp builds zero tangents by unflattening, and a Robot
@@ -94,30 +99,28 @@ def _pose_jacobian_of(leaves, tree, opts, wrt):
     """(d(tip pose) / dw, Solution) for w the tip load ("load"), the actuation ("actuation") or a
     tuple of scalar Robot field names, at the solve arguments given as leaves of ``tree``."""
     robot, act, load, *rest = jax.tree.unflatten(tree, leaves)
-
-    def configure(w):
-        if wrt == "load":
-            return robot, act, TipLoad(w[:3], w[3:])
-        if wrt == "actuation":
-            return robot, Actuation(w[:-1], w[-1]), load
-        return dataclasses.replace(robot, **dict(zip(wrt, w, strict=True))), act, load
-
     if wrt == "load":
         w = jnp.concatenate([jnp.asarray(load.force), jnp.asarray(load.moment)])
+
+        def configure(w):
+            return robot, act, TipLoad(w[:3], w[3:])
+
     elif wrt == "actuation":
         w = jnp.concatenate([jnp.asarray(act.tensions), jnp.reshape(jnp.asarray(act.insertion), (1,))])
+
+        def configure(w):
+            return robot, Actuation(w[:-1], w[-1]), load
+
     else:
         w = jnp.stack([jnp.asarray(getattr(robot, p)) for p in wrt])
+
+        def configure(w):
+            return dataclasses.replace(robot, **dict(zip(wrt, w, strict=True))), act, load
+
     return _tip_pose_jacobian(lambda w: shoot(*configure(w), *rest, opts)[0], w)
 
 
 _pose_jacobian = jax.jit(_pose_jacobian_of, static_argnums=(1, 2, 3))
-
-
-def _jacobian(robot, act, load, wrt, throw, solve_options):
-    args, opts = solve_arguments(robot, act, load, **solve_options)
-    leaves, tree = jax.tree.flatten(args)
-    return _checked(*_pose_jacobian(leaves, tree, opts, wrt), throw, solve_options)[0]
 
 
 def kinematic_jacobian(robot: Robot, act: Actuation, load: TipLoad | None = None, *, throw: bool = True, **solve_options):
@@ -126,7 +129,7 @@ def kinematic_jacobian(robot: Robot, act: Actuation, load: TipLoad | None = None
     The last column is the tube insertion depth, a real differentiable input (one-sided at d = 0
     and d = L, where the solution extends smoothly). Arguments as for ``compliance``.
     """
-    return _jacobian(robot, act, load, "actuation", throw, solve_options)
+    return _checked_call(_pose_jacobian, robot, act, load, throw, solve_options, "actuation")[0]
 
 
 def parameter_jacobian(
@@ -139,7 +142,7 @@ def parameter_jacobian(
     for p in params:
         if p not in SCALAR_FIELDS:
             raise ValueError(f"params: {p!r} is not a scalar Robot field; allowed: {list(SCALAR_FIELDS)}")
-    return _jacobian(robot, act, load, tuple(params), throw, solve_options)
+    return _checked_call(_pose_jacobian, robot, act, load, throw, solve_options, tuple(params))[0]
 
 
 def finite_difference_compliance(

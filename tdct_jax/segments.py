@@ -152,8 +152,7 @@ def _constitutive_jvp(primals, tangents):
     """Implicit differentiation at the converged strains: dw = -J^-1 (dF/d inputs) d inputs."""
     seg, bf, bm = primals
     w = _constitutive(seg, bf, bm)
-    _, J = _residual_and_jacobian(seg, w, bf, bm)
-    _, dF = jax.jvp(lambda *a: _residual_and_jacobian(a[0], w, *a[1:])[0], primals, tangents)
+    (_, J), (dF, _) = jax.jvp(lambda seg, bf, bm: _residual_and_jacobian(seg, w, bf, bm), primals, tangents)
     return w, -solve_spd(J, dF)
 
 

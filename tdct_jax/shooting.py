@@ -167,7 +167,7 @@ def _integrate(robot, act, load, gravity, opts, x, F_c, path=False):
     return res, ys
 
 
-def _newton(F, x0, tol, max_iter):
+def _newton(F, x0, J0, tol, max_iter):
     """Levenberg-Marquardt-damped Newton on F(x)[0] = 0 with exact jacfwd Jacobians.
 
     F returns (residual, outputs): Newton also carries the Jacobian of the outputs (the tip pose),
@@ -175,7 +175,8 @@ def _newton(F, x0, tol, max_iter):
     |F| and grows tenfold after each that does not, so the iteration is Newton's (quadratic) near
     the root and a short gradient step far from it. The first pass evaluates x0 itself, so the
     Jacobian code appears once in the compiled loop and the last Jacobians are at the root.
-    Returns the root and (residual, Newton steps taken, (d residual / dx, d outputs / dx)).
+    J0 (zeros shaped like the Jacobians) only sets their shapes. Returns the root and (residual,
+    Newton steps taken, (d residual / dx, d outputs / dx)).
     """
 
     def value_and_jac(x):
@@ -199,9 +200,7 @@ def _newton(F, x0, tol, max_iter):
         x_try = x - jnp.linalg.solve(J_r.T @ J_r + mu * jnp.eye(x.size), J_r.T @ r)
         return x, r, J, mu, it + 1, x_try
 
-    n = x0.size
-    J0 = jax.tree.map(lambda o: jnp.zeros(jnp.shape(o) + (n,)), jax.eval_shape(F, x0))
-    init = (x0, jnp.full(n, jnp.inf), J0, jnp.asarray(1e-5), 0, x0)
+    init = (x0, jnp.full(x0.size, jnp.inf), J0, jnp.asarray(1e-5), 0, x0)
     x, r, J, _, it, _ = lax.while_loop(not_done, body, init)
     return x, (r, (it - 1).astype(x.dtype), J)  # float: the root's aux takes (zero) float tangents
 
@@ -217,6 +216,8 @@ def _continuation(F_at, x0, x_straight, tol, max_iter):
     scaled by lam; the straight-rod guess is linear in the loads, so lam * x_straight starts each
     ramp. Returns (root, (residual, total Newton steps, the last Jacobians)).
     """
+    n = x0.size
+    J0 = jax.tree.map(lambda o: jnp.zeros(jnp.shape(o) + (n,)), jax.eval_shape(F_at(1.0), x0))
 
     def not_done(c):
         return ~c[-1]
@@ -225,15 +226,13 @@ def _continuation(F_at, x0, x_straight, tol, max_iter):
         x, r, it, J, K, stage, _ = c
         lam = stage / K
         guess = jnp.where(stage == 1, jnp.where(K == STAGES[0], x0, lam * x_straight), x)
-        x_new, (r_new, it_new, J_new) = _newton(F_at(lam), guess, tol, max_iter)
+        x_new, (r_new, it_new, J_new) = _newton(F_at(lam), guess, J0, tol, max_iter)
         ok = jnp.max(jnp.abs(r_new)) <= tol
         K_next = jnp.where(ok, K, K * (STAGES[1] // STAGES[0]))
         stage_next = jnp.where(ok, stage + 1, 1)
         done = (ok & (stage == K)) | (K_next > STAGES[-1])
         return x_new, r_new, it + it_new, J_new, K_next, stage_next, done
 
-    n = x0.size
-    J0 = jax.tree.map(lambda o: jnp.zeros(jnp.shape(o) + (n,)), jax.eval_shape(F_at(1.0), x0))
     init = (x0, jnp.full(n, jnp.inf), jnp.zeros((), x0.dtype), J0, STAGES[0], 1, False)
     x, r, it, J, *_ = lax.while_loop(not_done, body, init)
     return x, (r, it, J)

@@ -224,7 +224,11 @@ def iter_batched(
 
 def run_batched(kernel: Kernel, base, points: dict, **options) -> dict:
     """``iter_batched``'s chunks joined: numpy outputs over the whole leading axis of ``points``."""
-    parts = [out for _, out in iter_batched(kernel, base, points, **options)]
+    return _joined([out for _, out in iter_batched(kernel, base, points, **options)])
+
+
+def _joined(parts: list[dict]) -> dict:
+    """Chunks' outputs (dicts of arrays with a leading point axis) concatenated along that axis."""
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
@@ -528,8 +532,7 @@ def sweep(
     chunks = _chunks(plan, chunk_size, progress)
     if out is not None:
         return _stream_npz(out, plan, chunks)
-    parts = [c.outputs for c in chunks]
-    outputs = {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
+    outputs = _joined([c.outputs for c in chunks])
     inputs = unflatten(plan.points, plan.shape, plan.lead)
     return SweepResult(plan.shape, plan.axes, inputs, seconds=perf_counter() - start, **unflatten(outputs, plan.shape))
 
