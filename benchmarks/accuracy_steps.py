@@ -22,7 +22,8 @@ from _common import timings, write_result
 
 import tdct_jax as tdct
 from tdct_jax import segments
-from tdct_jax.shooting import STEPS
+
+STEPS = tdct.SolverOptions().steps
 
 TARGET_M = 1e-6
 """Issue 6: the default step count keeps the tip within 1 micrometre of the converged solution."""
@@ -39,7 +40,9 @@ def envelope(n: int, seed: int = 0) -> dict:
 
 
 def tips(robot, batch, steps):
-    res = tdct.sweep(robot, batch=batch, steps=steps, progress=False, chunk_size=len(batch["insertion"]))
+    res = tdct.sweep(
+        robot, batch=batch, solver=tdct.SolverOptions(steps=steps), progress=False, chunk_size=len(batch["insertion"])
+    )
     if res.n_failed:
         raise RuntimeError(f"{res.n_failed} configurations did not converge at steps = {steps}")
     return res.tip_position
@@ -77,8 +80,10 @@ def main() -> None:
     rows = []
     for steps in steps_list:
         err = np.linalg.norm(tips(robot, batch, steps) - reference, axis=1)
-        tdct.solve(robot, act, load, steps=steps, throw=True)
-        solve_ms = 1e3 * timings(lambda steps=steps: tdct.solve(robot, act, load, steps=steps).position, repeats)
+        tdct.solve(robot, act, load, solver=tdct.SolverOptions(steps=steps))
+        solve_ms = 1e3 * timings(
+            lambda steps=steps: tdct.solve(robot, act, load, solver=tdct.SolverOptions(steps=steps)).position, repeats
+        )
         rows.append(
             dict(
                 steps_per_segment=steps,

@@ -33,7 +33,8 @@ from _common import timings, write_result
 from scipy.optimize import fsolve
 
 import tdct_jax as tdct
-from tdct_jax.shooting import STEPS
+
+STEPS = tdct.SolverOptions().steps
 
 PAPER_SECONDS = 0.82
 """The paper's reported time per solve (MATLAB)."""
@@ -226,7 +227,8 @@ def compare(robot: tdct.Robot, name: str, steps: int, reps: dict) -> dict:
     problem = Problem(robot, tensions, insertion, force, moment)
 
     (tip_np, wrench, nfev), np_solve_s = _timed(lambda: problem.solve(steps), reps["np_solve"])
-    sol = tdct.solve(robot, act, load, steps=steps, throw=True)
+    solver = tdct.SolverOptions(steps=steps)
+    sol = tdct.solve(robot, act, load, solver=solver)
     tip_jax = np.asarray(sol.tip_position)
     tip_diff = float(np.linalg.norm(tip_np - tip_jax) / np.linalg.norm(tip_jax))
     if not tip_diff <= AGREEMENT:
@@ -234,11 +236,11 @@ def compare(robot: tdct.Robot, name: str, steps: int, reps: dict) -> dict:
             f"{name}, steps {steps}: baseline and tdct_jax tips differ by {tip_diff:.2e} relative > {AGREEMENT:g}: "
             f"numpy {tip_np}, tdct_jax {tip_jax} [m]"
         )
-    jax_solve_s = float(np.median(timings(lambda: tdct.solve(robot, act, load, steps=steps).position, reps["jax_solve"])))
+    jax_solve_s = float(np.median(timings(lambda: tdct.solve(robot, act, load, solver=solver).position, reps["jax_solve"])))
 
     CM_fd, np_cm_s = _timed(lambda: compliance_fd(problem, steps, wrench), reps["np_fd"])
-    CM = np.asarray(tdct.compliance(robot, act, load, steps=steps))
-    jax_cm_s = float(np.median(timings(lambda: tdct.compliance(robot, act, load, steps=steps), reps["jax_cm"])))
+    CM = np.asarray(tdct.compliance(robot, act, load, solver=solver))
+    jax_cm_s = float(np.median(timings(lambda: tdct.compliance(robot, act, load, solver=solver), reps["jax_cm"])))
     return dict(
         config=name,
         steps=steps,
@@ -281,9 +283,9 @@ def main(quick: bool, out: str | None = None) -> None:
     compile_s, rows = {}, []
     for steps in steps_list:
         t = time.perf_counter()
-        jax.block_until_ready(tdct.solve(robot, tdct.Actuation(), steps=steps).position)
+        jax.block_until_ready(tdct.solve(robot, tdct.Actuation(), solver=tdct.SolverOptions(steps=steps)).position)
         t1 = time.perf_counter()
-        jax.block_until_ready(tdct.compliance(robot, tdct.Actuation(), steps=steps))
+        jax.block_until_ready(tdct.compliance(robot, tdct.Actuation(), solver=tdct.SolverOptions(steps=steps)))
         compile_s[steps] = dict(solve=t1 - t, compliance=time.perf_counter() - t1)
         print(f"steps {steps}: compile + first tdct_jax solve {t1 - t:.1f} s, compliance {compile_s[steps]['compliance']:.1f} s")
         print(HEADER)

@@ -28,8 +28,9 @@ from _common import write_result
 from sweep_throughput import envelope
 
 import tdct_jax as tdct
-from tdct_jax.shooting import STEPS
-from tdct_jax.sweep import default_chunk_size, lanes_per_call, mesh_for
+from tdct_jax.batch import default_chunk_size, lanes_per_call, mesh_for
+
+STEPS = tdct.SolverOptions().steps
 
 AGREEMENT_POINTS = 256
 STREAMED = 10**5

@@ -43,7 +43,8 @@ import numpy as np
 from _common import timings, write_result
 
 import tdct_jax as tdct
-from tdct_jax.shooting import STEPS
+
+STEPS = tdct.SolverOptions().steps
 
 # numba caches PyElastica's compiled kernels on disk (cache=True), so only the first run after an
 # install would show the compile time: compile into a fresh folder unless the user chose one.

@@ -16,7 +16,9 @@ import numpy as np
 from _common import timings, write_result
 
 import tdct_jax as tdct
-from tdct_jax.shooting import STEPS, SolverOptions, _integrate, _scale, _straight_guess
+from tdct_jax.shooting import force_scale, shoot, straight_rod
+
+STEPS = tdct.SolverOptions().steps
 
 
 def main() -> None:
@@ -27,17 +29,17 @@ def main() -> None:
 
     robot = tdct.Robot()
     act, load = tdct.Actuation((6.0, 0, 0, 0), 0.080), tdct.TipLoad.from_mass(0.020)
-    gravity, opts = jnp.asarray(tdct.STANDARD_GRAVITY), SolverOptions(steps=args.steps)
-    F_c = _scale(robot, act, load, gravity)
-    x0 = _straight_guess(robot, act, load, gravity, F_c)
+    gravity, solver = jnp.asarray(tdct.STANDARD_GRAVITY), tdct.SolverOptions(steps=args.steps)
+    F_c = force_scale(robot, act, load, gravity)
+    x0 = straight_rod(robot, act, load, gravity, F_c)
 
     def residual(x):
-        return _integrate(robot, act, load, gravity, opts, x, F_c)[0]
+        return shoot(robot, act, load, gravity, solver, x, F_c)[0]
 
     primal, jacobian = jax.jit(residual), jax.jit(jax.jacfwd(residual))
-    sol = tdct.solve(robot, act, load, steps=args.steps, throw=True)
+    sol = tdct.solve(robot, act, load, solver=solver)
     parts = {
-        "solve": lambda: tdct.solve(robot, act, load, steps=args.steps).position,
+        "solve": lambda: tdct.solve(robot, act, load, solver=solver).position,
         "primal shooting pass": lambda: primal(x0),
         "jacfwd pass (7 lanes)": lambda: jacobian(x0),
     }

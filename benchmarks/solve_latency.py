@@ -15,7 +15,8 @@ import numpy as np
 from _common import timings, write_result
 
 import tdct_jax as tdct
-from tdct_jax.shooting import STEPS, shoot
+
+STEPS = tdct.SolverOptions().steps
 
 CONFIGS = {
     "6 N, 80 mm, 20 g (Fig. 6)": ((6.0, 0, 0, 0), 0.080, 0.020),
@@ -38,7 +39,8 @@ def main() -> None:
 
     robot = tdct.Robot()
     t0 = time.perf_counter()
-    first = tdct.solve(robot, tdct.Actuation(), steps=args.steps)
+    solver = tdct.SolverOptions(steps=args.steps)
+    first = tdct.solve(robot, tdct.Actuation(), solver=solver)
     jax.block_until_ready(first.position)
     compile_s = time.perf_counter() - t0
     print(f"compile + first solve: {compile_s:.2f} s (steps = {args.steps} per segment)")
@@ -46,8 +48,8 @@ def main() -> None:
     rows = []
     for name, (tensions, insertion, mass) in CONFIGS.items():
         act, load = tdct.Actuation(tensions, insertion), tdct.TipLoad.from_mass(mass)
-        sol = tdct.solve(robot, act, load, steps=args.steps, throw=True)
-        times = timings(lambda act=act, load=load: tdct.solve(robot, act, load, steps=args.steps).position, repeats)
+        sol = tdct.solve(robot, act, load, solver=solver)
+        times = timings(lambda act=act, load=load: tdct.solve(robot, act, load, solver=solver).position, repeats)
         times_ms = times * 1e3
         row = dict(
             config=name,
@@ -68,7 +70,6 @@ def main() -> None:
         steps_per_segment=args.steps,
         repeats=repeats,
         compile_and_first_solve_s=compile_s,
-        cache_entries=shoot._cache_size(),
         configs=rows,
     )
     print(f"wrote {out}")

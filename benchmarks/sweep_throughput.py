@@ -20,8 +20,10 @@ import numpy as np
 from _common import peak_rss_mb, write_result
 
 import tdct_jax as tdct
-from tdct_jax.shooting import STEPS
-from tdct_jax.sweep import DEFAULT_CHUNK, lanes_per_call
+from tdct_jax.batch import CHUNK_SIZES, lanes_per_call
+
+STEPS = tdct.SolverOptions().steps
+DEFAULT_CHUNK = CHUNK_SIZES["cpu"]
 
 
 def envelope(n: int, seed: int = 0) -> dict:

@@ -4,8 +4,8 @@ A 1,000-step trajectory (tendons 1 and 4 and the insertion moving smoothly, 20 g
 solved three ways: a Python control loop calling ``tdct.solve`` with each step's ``guess`` set to
 the last base wrench (what a controller written in Python does), the same loop from the straight
 rod each time (cold), and the whole trajectory inside one compiled ``lax.scan``
-(``tdct.sweep``'s warm-start kernel, as ``warm_start=True`` runs it along a grid axis; no
-Python between steps). Reports the latency per update
+(``tdct.solve`` with each step's ``guess`` the last converged base wrench, under ``lax.scan``
+and ``jax.jit``; no Python between steps). Reports the latency per update
 (median and p90 for the loops, mean for the scan), Newton iterations and peak memory.
 
 Run: python benchmarks/trajectory.py [--quick]
@@ -19,12 +19,14 @@ import time
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from _common import peak_rss_mb, write_result
+from jax import lax
 
 import tdct_jax as tdct
-from tdct_jax.shooting import MAX_ITER, STEPS, TOL, gravity_vector
-from tdct_jax.sweep import Kernel, _solve_path, run_batched
+
+STEPS = tdct.SolverOptions().steps
 
 
 def trajectory(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -53,15 +55,16 @@ def control_loop(robot, tensions, insertions, load, warm: bool):
 
 
 def compiled_path(robot, load):
-    """The trajectory as one warm-started path of ``sweep``'s kernel (one compiled scan, each solve
-    started from the last converged one): (tips, Newton iterations, converged) per step."""
-    options = (("steps", STEPS), ("transition", "balanced"), ("tendon_model", "exact"), ("tol", TOL), ("max_iter", MAX_ITER))
-    kernel = Kernel(_solve_path, options)
-    base = (robot, tdct.Actuation(), load, gravity_vector(tdct.STANDARD_GRAVITY))
+    """The trajectory as one compiled scan, each solve started from the last converged one:
+    (tips, Newton iterations, converged) per step."""
 
+    def step(guess, inputs):
+        sol = tdct.solve(robot, tdct.Actuation(*inputs), load, guess=guess, throw=False)
+        return jnp.where(sol.converged, sol.base_wrench, guess), (sol.tip_position, sol.iterations, sol.converged)
+
+    @jax.jit
     def path(tensions, insertions):
-        out = run_batched(kernel, base, {"tensions": tensions[None], "insertion": insertions[None]}, progress=False)
-        return out["tip_position"][0], out["iterations"][0], out["converged"][0]
+        return lax.scan(step, jnp.full(6, jnp.nan), (tensions, insertions))[1]
 
     return path
 

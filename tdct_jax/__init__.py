@@ -4,6 +4,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
+from . import status as status  # noqa: E402
 from .calibrate import Calibration as Calibration  # noqa: E402
 from .calibrate import calibrate as calibrate  # noqa: E402
 from .calibrate import synthesize as synthesize  # noqa: E402
@@ -29,14 +30,17 @@ from .mechanics import parameter_jacobian as parameter_jacobian  # noqa: E402
 from .mechanics import positions_at as positions_at  # noqa: E402
 from .mechanics import rmse as rmse  # noqa: E402
 from .mechanics import tip_error as tip_error  # noqa: E402
+from .options import SolverOptions as SolverOptions  # noqa: E402
+from .results import CapacityResult as CapacityResult  # noqa: E402
+from .results import OptimumResult as OptimumResult  # noqa: E402
+from .results import SweepChunk as SweepChunk  # noqa: E402
+from .results import SweepResult as SweepResult  # noqa: E402
+from .results import gather as gather  # noqa: E402
 from .robot import Robot as Robot  # noqa: E402
-from .shooting import ConvergenceError as ConvergenceError  # noqa: E402
-from .shooting import Solution as Solution  # noqa: E402
-from .shooting import SolverOptions as SolverOptions  # noqa: E402
-from .shooting import solve as solve  # noqa: E402
-from .sweep import SweepChunk as SweepChunk  # noqa: E402
-from .sweep import SweepResult as SweepResult  # noqa: E402
-from .sweep import gather as gather  # noqa: E402
+from .solve import Solution as Solution  # noqa: E402
+from .solve import solve as solve  # noqa: E402
+from .solve import tip_angle as tip_angle  # noqa: E402
+from .status import ConvergenceError as ConvergenceError  # noqa: E402
 from .sweep import sweep as sweep  # noqa: E402
 from .sweep import sweep_chunks as sweep_chunks  # noqa: E402
 

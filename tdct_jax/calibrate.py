@@ -19,18 +19,14 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
+from . import status
+from .checks import check_integer
 from .data import Experiment, stack
-from .loads import STANDARD_GRAVITY, Actuation, TipLoad
+from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .mechanics import shape_errors
+from .options import DEFAULT_SOLVER, SolverOptions
 from .robot import SCALAR_FIELDS, Robot
-from .shooting import (
-    ConvergenceError,
-    Solution,
-    check_inputs,
-    gravity_vector,
-    nested_solve_options,
-    solve,
-)
+from .solve import Solution, check_inputs, check_solution, solve
 
 LINEAR_FIELDS = ("nu_silicone", "nu_tube")
 """Fields fitted as they are (they may be zero or negative); every other field is fitted in log space."""
@@ -39,26 +35,33 @@ FBG_POINTS = 33
 
 
 class LeastSquares(NamedTuple):
-    """Outcome of ``levenberg_marquardt``: the last accepted point and what was evaluated there."""
+    """Outcome of ``levenberg_marquardt``: the last accepted point and what was evaluated there;
+    ``result`` is a ``tdct_jax.status`` code (SUCCESS, OUTER_LIMIT, or the model's own failure at
+    the start)."""
 
     x: np.ndarray
     residual: np.ndarray
     jacobian: np.ndarray
     aux: object
     iterations: int
-    converged: bool
+    result: int
     message: str
+
+    @property
+    def converged(self) -> bool:
+        return self.result == status.SUCCESS
 
 
 def levenberg_marquardt(
-    evaluate: Callable, x0, *, max_iter: int = 30, xtol: float = 1e-8, callback: Callable | None = None
+    evaluate: Callable, x0, *, max_steps: int = 30, xtol: float = 1e-8, callback: Callable | None = None
 ) -> LeastSquares:
     """Minimises |r(x)|^2 by Levenberg-Marquardt with Marquardt's diagonal scaling.
 
     Args:
-        evaluate: x -> (r (m,), J (m, p), ok, aux) in numpy; ``ok`` says the model converged.
+        evaluate: x -> (r (m,), J (m, p), code, aux) in numpy; ``code`` is the model's
+            ``status`` code there (0: it converged).
         x0: starting point, (p,).
-        max_iter: most trial steps.
+        max_steps: most trial steps.
         xtol: converged when the undamped Gauss-Newton step moves no component more than this.
         callback: called as callback(iteration, r, step) after each accepted step.
 
@@ -66,48 +69,49 @@ def levenberg_marquardt(
     shrinks tenfold (towards Gauss-Newton), otherwise it grows tenfold.
     """
     x = np.asarray(x0, dtype=float)
-    r, J, ok, aux = evaluate(x)
-    if not ok:
-        return LeastSquares(x, r, J, aux, 0, False, "the model did not converge at the starting values")
+    r, J, code, aux = evaluate(x)
+    if code != status.SUCCESS:
+        return LeastSquares(x, r, J, aux, 0, code, "the model did not converge at the starting values")
     mu = 1e-3
-    for it in range(max_iter):
+    for it in range(max_steps):
         if np.abs(np.linalg.lstsq(J, -r, rcond=None)[0]).max() <= xtol:
-            return LeastSquares(x, r, J, aux, it, True, "converged")
+            return LeastSquares(x, r, J, aux, it, status.SUCCESS, "converged")
         A = J.T @ J
         step = np.linalg.solve(A + mu * np.diag(np.maximum(np.diag(A), 1e-300)), -J.T @ r)
-        r_t, J_t, ok_t, aux_t = evaluate(x + step)
-        if ok_t and np.all(np.isfinite(r_t)) and r_t @ r_t < r @ r:
+        r_t, J_t, code_t, aux_t = evaluate(x + step)
+        if code_t == status.SUCCESS and np.all(np.isfinite(r_t)) and r_t @ r_t < r @ r:
             x, r, J, aux = x + step, r_t, J_t, aux_t
             mu = max(mu / 10, 1e-12)
             if callback is not None:
                 callback(it + 1, r, step)
         else:
             mu *= 10
-    return LeastSquares(x, r, J, aux, max_iter, False, f"hit max_iter = {max_iter}; raise it or start nearer the optimum")
+    message = f"hit max_steps = {max_steps}; raise it or start nearer the optimum"
+    return LeastSquares(x, r, J, aux, max_steps, status.OUTER_LIMIT, message)
 
 
 def _values(x, params) -> dict:
     return {p: x[i] if p in LINEAR_FIELDS else jnp.exp(x[i]) for i, p in enumerate(params)}
 
 
-def _deviations(robot, batch: Experiment, gravity, options):
-    """Model minus measured positions (E, n, 3) [m], and per experiment: converged, RMSE, tip
+def _deviations(robot, batch: Experiment, gravity, solver):
+    """Model minus measured positions (E, n, 3) [m], and per experiment: result code, RMSE, tip
     error and the Solution."""
 
     def one(e):
-        sol = solve(robot, e.act, e.tip_load(gravity), gravity=gravity, **dict(options))
+        sol = solve(robot, e.act, e.tip_load(gravity), gravity=gravity, solver=solver, throw=False)
         dev, e_rms, e_tip = shape_errors(sol, e)
-        return dev, (sol.converged, e_rms, e_tip, sol)
+        return dev, (sol.result, e_rms, e_tip, sol)
 
     return jax.vmap(one)(batch)
 
 
-@partial(jax.jit, static_argnames=("params", "options"))
-def _fit_step(x, robot, batch, gravity, params, options):
+@partial(jax.jit, static_argnames=("params",))
+def _fit_step(x, robot, batch, gravity, solver, params):
     """Weighted residuals (E n 3,), their exact Jacobian in x, and per-experiment statistics."""
 
     def residual(x):
-        dev, stats = _deviations(dataclasses.replace(robot, **_values(x, params)), batch, gravity, options)
+        dev, stats = _deviations(dataclasses.replace(robot, **_values(x, params)), batch, gravity, solver)
         r = (dev * jnp.sqrt(batch.weight)[..., None]).ravel()
         return r, (r, stats)
 
@@ -115,7 +119,14 @@ def _fit_step(x, robot, batch, gravity, params, options):
     return r, J, stats
 
 
-_model_shapes = jax.jit(_deviations, static_argnames=("options",))
+_model_shapes = jax.jit(_deviations)
+
+
+def _first_failure(codes) -> int:
+    """The first nonzero status code, or SUCCESS."""
+    codes = np.asarray(codes).ravel()
+    bad = np.flatnonzero(codes)
+    return int(codes[bad[0]]) if bad.size else status.SUCCESS
 
 
 @dataclasses.dataclass(frozen=True)
@@ -134,7 +145,9 @@ class Calibration:
         solutions: the model's Solutions at the fitted values, batched (one per experiment), e.g.
             for ``plotting.plot_calibration``.
         noise: the estimated measurement noise s per coordinate [m].
-        iterations, converged, message: Levenberg-Marquardt's outcome (every shape must solve).
+        iterations, result, message: Levenberg-Marquardt's outcome (every shape must solve):
+            steps taken, a ``tdct_jax.status`` code (``converged`` is result == SUCCESS) and what
+            it means.
         seconds: wall time, compiles included.
     """
 
@@ -152,9 +165,13 @@ class Calibration:
     solutions: Solution
     noise: float
     iterations: int
-    converged: bool
+    result: int
     message: str
     seconds: float
+
+    @property
+    def converged(self) -> bool:
+        return self.result == status.SUCCESS
 
     def to_dict(self) -> dict:
         """JSON-ready summary: fitted values in SI, errors in mm and in % of the robot length."""
@@ -213,12 +230,12 @@ def calibrate(
     experiments: Sequence[Experiment],
     params: Sequence[str] = ("E_silicone",),
     *,
-    max_iter: int = 30,
+    max_steps: int = 30,
     xtol: float = 1e-8,
     gravity=STANDARD_GRAVITY,
+    solver: SolverOptions = DEFAULT_SOLVER,
     progress: bool = True,
-    throw: bool = False,
-    **solve_options,
+    throw: bool = True,
 ) -> Calibration:
     """Fits Robot fields to measured shapes by Levenberg-Marquardt with exact Jacobians (Sec. III.B).
 
@@ -230,16 +247,17 @@ def calibrate(
         robot: the robot with the starting values of ``params`` and every other field fixed.
         experiments: measured shapes and their conditions (``tdct_jax.data.read_experiments``).
         params: scalar Robot fields to fit, e.g. ("E_silicone", "tendon_offset").
-        max_iter: most Levenberg-Marquardt trial steps.
+        max_steps: most Levenberg-Marquardt trial steps (the fit's own limit).
         xtol: converged when the Gauss-Newton step changes no field by more than this (relative
-            for log-space fields, absolute for Poisson ratios).
+            for log-space fields, absolute for Poisson ratios): the fit's own tolerance.
         gravity: world gravity [m/s^2] the shapes were measured under (None: none).
+        solver: SolverOptions for every solve.
         progress: show a progress bar (the first step includes the compile).
-        throw: raise ConvergenceError when the fit does not converge.
-        **solve_options: steps, transition, tendon_model, solve_tol, solve_max_iter for the solves.
+        throw: raise ConvergenceError when the fit does not converge (default, as everywhere);
+            with False check ``converged`` / ``result``.
 
     Returns:
-        Calibration; check ``converged`` unless ``throw`` is set.
+        Calibration.
 
     Raises:
         ValueError: unknown or repeated params, no experiments, experiments that do not fit the robot.
@@ -251,8 +269,8 @@ def calibrate(
     if not experiments or not all(isinstance(e, Experiment) for e in experiments):
         raise ValueError("experiments must be a non-empty sequence of tdct_jax.data.Experiment")
     for e in experiments:
-        check_inputs(robot, e.act, e.load)
-    static = _options(solve_options)
+        check_inputs(robot, e.act, e.load, solver)
+    max_steps = check_integer("max_steps", max_steps)
     batch, g = stack(experiments), gravity_vector(gravity)
 
     start = perf_counter()
@@ -261,10 +279,10 @@ def calibrate(
     first = []
 
     def evaluate(x):
-        r, J, (ok, e_rms, e_tip, sol) = _fit_step(jnp.asarray(x), robot, batch, g, params, static)
+        r, J, (codes, e_rms, e_tip, sol) = _fit_step(jnp.asarray(x), robot, batch, g, solver, params)
         stats = (np.asarray(e_rms), np.asarray(e_tip), sol)
         first[:] = first or [stats]
-        return np.asarray(r), np.asarray(J), bool(np.all(ok)), stats
+        return np.asarray(r), np.asarray(J), _first_failure(codes), stats
 
     def report(it, r, step):
         bar.update(it - bar.n)
@@ -272,7 +290,7 @@ def calibrate(
 
     x0 = np.array([float(getattr(robot, p)) for p in params])
     x0 = np.where([p in LINEAR_FIELDS for p in params], x0, np.log(x0))
-    fit = levenberg_marquardt(evaluate, x0, max_iter=max_iter, xtol=xtol, callback=report)
+    fit = levenberg_marquardt(evaluate, x0, max_steps=max_steps, xtol=xtol, callback=report)
     bar.close()
     before = first[0]
 
@@ -297,18 +315,12 @@ def calibrate(
         solutions=fit.aux[2],
         noise=float(np.sqrt(s2)),
         iterations=fit.iterations,
-        converged=fit.converged,
+        result=fit.result,
         message=fit.message,
         seconds=perf_counter() - start,
     )
-    if throw and not result.converged:
-        raise ConvergenceError(f"calibration of {', '.join(params)} did not converge: {fit.message}")
+    status.check(fit.result, throw=throw, what=f"the calibration of {', '.join(params)}", max_steps=max_steps)
     return result
-
-
-def _options(solve_options: dict) -> tuple:
-    """The checked solve options as a hashable (static) tuple."""
-    return tuple(sorted(nested_solve_options(solve_options).items()))
 
 
 def _check_params(robot: Robot, params: tuple) -> None:
@@ -331,7 +343,7 @@ def synthesize(
     noise: float = 1e-4,
     seed: int = 0,
     gravity=STANDARD_GRAVITY,
-    **solve_options,
+    solver: SolverOptions = DEFAULT_SOLVER,
 ) -> list[Experiment]:
     """FBG-like measured shapes from the model: positions at ``n_points`` equally spaced arc
     lengths from base to tip, plus Gaussian noise of standard deviation ``noise`` [m] on every
@@ -346,32 +358,30 @@ def synthesize(
         noise: noise standard deviation [m] (>= 0).
         seed: random seed.
         gravity: world gravity [m/s^2] (None: none).
-        **solve_options: steps, transition, tendon_model, solve_tol, solve_max_iter.
+        solver: SolverOptions for the solves.
 
     Raises:
-        ValueError: bad counts or values; ConvergenceError: a shape that did not solve.
+        ValueError: bad counts or values; ConvergenceError: a shape that did not solve (always:
+            there is no shape to return for it).
     """
     n_exp = len(actuations)
     tip_masses = [0.0] * n_exp if tip_masses is None else list(tip_masses)
     loads = [TipLoad()] * n_exp if loads is None else list(loads)
     if n_exp == 0 or len(tip_masses) != n_exp or len(loads) != n_exp:
         raise ValueError(f"need one actuation, tip mass and load per experiment, got {n_exp}, {len(tip_masses)} and {len(loads)}")
-    if not isinstance(n_points, (int, np.integer)) or n_points < 2:
-        raise ValueError(f"n_points = {n_points!r} must be an integer >= 2")
+    n_points = check_integer("n_points", n_points, 2)
     if not (np.isfinite(noise) and noise >= 0):
         raise ValueError(f"noise = {noise!r} must be a finite standard deviation >= 0 [m]")
-    options = _options(solve_options)
     s = np.linspace(0.0, float(robot.length), n_points)
     exact = [
         Experiment(s, np.zeros((n_points, 3)), a, ld, m, name=condition_name(a, m))
         for a, ld, m in zip(actuations, loads, tip_masses, strict=True)
     ]
     for e in exact:
-        check_inputs(robot, e.act, e.load)
-    dev, (ok, *_) = _model_shapes(robot, stack(exact), gravity_vector(gravity), options)
-    if not np.all(ok):
-        bad = [e.name for e, good in zip(exact, np.asarray(ok), strict=True) if not good]
-        raise ConvergenceError(f"synthesize: the model did not converge for {bad}")
+        check_inputs(robot, e.act, e.load, solver)
+    dev, (_, _, _, sol) = _model_shapes(robot, stack(exact), gravity_vector(gravity), solver)
+    names = ", ".join(e.name for e in exact)
+    check_solution(sol, solver, True, what=f"synthesize (experiments {names})")
     rng = np.random.default_rng(seed)
     return [
         dataclasses.replace(e, position=np.asarray(p) + noise * rng.standard_normal((n_points, 3)))

@@ -15,8 +15,10 @@ import numpy as np
 
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .mechanics import compliance, compliance_ellipsoid
+from .options import MAX_ITER, STEPS, SolverOptions
 from .robot import SCALAR_FIELDS, Robot
-from .shooting import MAX_ITER, STEPS, TOL, ConvergenceError, raise_if_failed, solve
+from .solve import check_solution, solve
+from .status import ConvergenceError
 
 COMPILE_CACHE_ENV = "TDCT_COMPILE_CACHE"
 """Environment variable: a folder for the CLI's compilation cache, or 0 / off for none."""
@@ -96,6 +98,9 @@ def _parser() -> argparse.ArgumentParser:
         help="override one Robot field, SI units (e.g. E_silicone=1.1e6); repeatable, applied after --robot",
     )
     described.add_argument("--steps", type=int, default=STEPS, help=f"RK4 steps per segment (default {STEPS})")
+    described.add_argument(
+        "--max-iter", type=int, default=MAX_ITER, help=f"most Newton steps per load stage of each solve (default {MAX_ITER})"
+    )
     described.add_argument("--no-gravity", action="store_true", help="ignore the robot's own weight")
 
     common = argparse.ArgumentParser(add_help=False, parents=[described])
@@ -140,7 +145,7 @@ def _parser() -> argparse.ArgumentParser:
     k = verbs.add_parser("calibrate", parents=[described], help="fit Robot fields to measured shape files (Sec. III.B)")
     k.add_argument("files", nargs="+", metavar="FILE", help="shape files (CSV, see tdct_jax.data) or folders of them")
     k.add_argument("--params", default="E_silicone", help="comma-separated Robot fields to fit (default E_silicone)")
-    k.add_argument("--max-iter", type=int, default=30, help="most Levenberg-Marquardt steps (default 30)")
+    k.add_argument("--max-steps", type=int, default=30, help="most Levenberg-Marquardt steps (default 30)")
     k.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     k.add_argument("--plot", metavar="fit.png", help="save model over measured shapes (side view and 3D)")
     k.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -160,6 +165,10 @@ def _gravity(args):
     return None if args.no_gravity else STANDARD_GRAVITY
 
 
+def _solver(args) -> SolverOptions:
+    return SolverOptions(steps=args.steps, max_iter=args.max_iter)
+
+
 def _inputs(args):
     """Robot, actuation, load and solve options from the shared flags, in SI units."""
     robot = _robot(args)
@@ -168,7 +177,7 @@ def _inputs(args):
         load = TipLoad(force=TipLoad.from_mass(args.tip_mass_g * 1e-3).force, moment=args.tip_moment)
     else:
         load = TipLoad(force=args.tip_force or (0.0, 0.0, 0.0), moment=args.tip_moment)
-    options = dict(steps=args.steps, gravity=_gravity(args))
+    options = dict(gravity=_gravity(args), solver=_solver(args))
     return robot, act, load, options
 
 
@@ -200,7 +209,7 @@ def _compliance_command(args) -> int:
 
 def _solve_command(args) -> int:
     robot, act, load, options = _inputs(args)
-    sol = solve(robot, act, load, **options)
+    sol = solve(robot, act, load, **options, throw=False)
     tip_mm = np.asarray(sol.tip_position) * 1e3
     angle = float(np.degrees(sol.tip_angle))
     converged, res, iters = bool(sol.converged), float(sol.residual_norm), int(sol.iterations)
@@ -227,7 +236,7 @@ def _solve_command(args) -> int:
 
         title = f"tensions {', '.join(f'{t:g}' for t in args.tensions)} N, insertion {args.insertion_mm:g} mm"
         plot_shape(sol, act.insertion, args.plot, title=title)
-    raise_if_failed(sol, TOL, MAX_ITER)
+    check_solution(sol, options["solver"], True)
     return 0
 
 
@@ -262,7 +271,7 @@ def _synth_command(args) -> int:
         noise=args.noise_mm * 1e-3,
         seed=args.seed,
         gravity=_gravity(args),
-        steps=args.steps,
+        solver=_solver(args),
     )
     for i, e in enumerate(experiments, start=1):
         print(write_experiment(Path(args.out) / f"{i:02d}_{e.name}.csv", e))
@@ -276,17 +285,17 @@ def _calibrate_command(args) -> int:
     robot = _robot(args)
     experiments = read_experiments(args.files, robot)
     params = tuple(p.strip() for p in args.params.split(",") if p.strip())
-    options = dict(gravity=_gravity(args), steps=args.steps)
-    fit = calibrate(robot, experiments, params, max_iter=args.max_iter, progress=not args.quiet, **options)
+    options = dict(gravity=_gravity(args), solver=_solver(args))
+    fit = calibrate(robot, experiments, params, max_steps=args.max_steps, progress=not args.quiet, throw=False, **options)
     print(json.dumps(fit.to_dict()) if args.json else fit.summary())
     if args.plot:
         from .plotting import plot_calibration
-        from .sweep import unit_of
+        from .results import unit_of
 
         fitted = ", ".join(f"{p} = {fit.values[p]:.4g} {unit_of(p).replace('_per_', '/')}" for p in params)
         plot_calibration(fit.solutions, experiments, args.plot, title=f"calibrated: {fitted}")
     if not fit.converged:
-        raise ConvergenceError(f"calibration did not converge: {fit.message}")
+        raise ConvergenceError(f"calibration did not converge: {fit.message}", fit.result)
     return 0
 
 

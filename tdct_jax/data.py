@@ -57,14 +57,13 @@ import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import as_array, check_range, is_concrete
-from .loads import STANDARD_GRAVITY, Actuation, TipLoad
+from .checks import as_array, check_range, is_concrete
+from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .robot import Robot
-from .shooting import gravity_vector
+from .tree import pytree, set_fields, static
 
 VERSION = "1"
 COLUMNS = ("s_mm", "x_mm", "y_mm", "z_mm")
@@ -88,13 +87,12 @@ s_mm,x_mm,y_mm,z_mm
 """A complete shape file to copy; the module docstring explains each line."""
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree
 class Experiment:
     """One measured shape and the conditions it was measured under, SI units.
 
     A pytree: every array is a leaf (``name`` is static), so experiments pass through
-    ``jax.jit``, and a ``stack`` of them through ``jax.vmap``.
+    ``jax.jit``, and a ``stack`` of them (a leading batch axis on every leaf) through ``jax.vmap``.
 
     Attributes:
         s: arc length of each measured point from the base [m], shape (n,), strictly increasing,
@@ -114,33 +112,38 @@ class Experiment:
     load: TipLoad = dataclasses.field(default_factory=TipLoad)
     tip_mass: float = 0.0
     weight: object = None
-    name: str = dataclasses.field(default="", metadata=dict(static=True))
+    name: str = static(default="")
 
     def __post_init__(self):
         if not isinstance(self.act, Actuation):
             raise TypeError(f"act must be a tdct.Actuation, got {type(self.act).__name__}")
-        if self.load is None:
-            object.__setattr__(self, "load", TipLoad())
-        if not isinstance(self.load, TipLoad):
-            raise TypeError(f"load must be a tdct.TipLoad, got {type(self.load).__name__}")
+        load = TipLoad() if self.load is None else self.load
+        if not isinstance(load, TipLoad):
+            raise TypeError(f"load must be a tdct.TipLoad, got {type(load).__name__}")
         if not isinstance(self.name, str):
             raise TypeError(f"name must be a str, got {type(self.name).__name__}")
         s = as_array("s", self.s)
-        if is_concrete(s) and (s.ndim != 1 or s.size == 0):
-            raise ValueError(f"s must have shape (n,) with n >= 1, one arc length [m] per point, got shape {s.shape}")
+        batch = np.shape(self.act.insertion) if is_concrete(self.act.insertion) else None
+        if is_concrete(s) and batch is not None and (s.shape[:-1] != batch or s.shape[-1:] == (0,)):
+            stacked = f" (a stack of {batch[0]}: {batch + ('n',)}, like its actuation)" if batch else ""
+            raise ValueError(f"s must have shape (n,) with n >= 1, one arc length [m] per point{stacked}, got shape {s.shape}")
         shape = s.shape if is_concrete(s) else None
         weight = self.weight
         if weight is None:
-            weight = np.ones(s.shape) if is_concrete(s) else jnp.ones_like(s) if isinstance(s, jax.core.Tracer) else None
-        object.__setattr__(self, "s", s)
-        object.__setattr__(self, "position", as_array("position", self.position, None if shape is None else shape + (3,)))
-        object.__setattr__(self, "weight", as_array("weight", weight, shape))
-        object.__setattr__(self, "tip_mass", as_array("tip_mass", self.tip_mass, ()))
+            weight = np.ones(s.shape) if is_concrete(s) else jnp.ones_like(s)
+        set_fields(
+            self,
+            load=load,
+            s=s,
+            position=as_array("position", self.position, None if shape is None else shape + (3,)),
+            weight=as_array("weight", weight, shape),
+            tip_mass=as_array("tip_mass", self.tip_mass, None if shape is None else shape[:-1]),
+        )
         check_range("tip_mass", self.tip_mass, 0.0, unit=" kg")
         check_range("weight", self.weight, 0.0)
         check_range("s", s, 0.0, unit=" m")
         if is_concrete(s) and is_concrete(self.weight):
-            _check_increasing(s, self.weight)
+            _check_increasing(s.reshape(-1, s.shape[-1]), self.weight.reshape(-1, s.shape[-1]))
 
     @property
     def n_points(self) -> int:
@@ -148,29 +151,22 @@ class Experiment:
 
     def tip_load(self, gravity=STANDARD_GRAVITY) -> TipLoad:
         """The whole tip load: ``load`` plus the weight of ``tip_mass`` under ``gravity`` [m/s^2]
-        (None: no weight). Works under jit and vmap."""
+        (None: no weight). Works under jit and vmap, and on a stack."""
         weight = jnp.einsum("...,i->...i", jnp.asarray(self.tip_mass), gravity_vector(gravity))
-        return _assemble(TipLoad, force=jnp.asarray(self.load.force) + weight, moment=self.load.moment)
+        return TipLoad(force=jnp.asarray(self.load.force) + weight, moment=self.load.moment)
 
 
 def _check_increasing(s: np.ndarray, weight: np.ndarray) -> None:
-    step = np.diff(s)
-    bad = (step < 0) | ((step == 0) & (weight[1:] > 0))
+    """Each row of s (experiments, points) increases strictly where the weight is positive."""
+    step = np.diff(s, axis=-1)
+    bad = (step < 0) | ((step == 0) & (weight[:, 1:] > 0))
     if np.any(bad):
-        i = int(np.argmax(bad))
+        row, i = np.unravel_index(int(np.argmax(bad)), bad.shape)
+        where = f"experiment {row}: " if len(s) > 1 else ""
         raise ValueError(
-            f"s must be strictly increasing, got s[{i}] = {s[i]:g} m then s[{i + 1}] = {s[i + 1]:g} m"
+            f"{where}s must be strictly increasing, got s[{i}] = {s[row, i]:g} m then s[{i + 1}] = {s[row, i + 1]:g} m"
             " (a repeat is allowed only for padding points of weight 0)"
         )
-
-
-def _assemble(cls, **fields):
-    """An instance of the frozen dataclass ``cls`` from already-checked leaves, skipping
-    ``__post_init__``, whose shape checks are for one experiment and reject a batch axis."""
-    obj = object.__new__(cls)
-    for key, value in fields.items():
-        object.__setattr__(obj, key, value)
-    return obj
 
 
 # ----------------------------------------------------------------------------- reading
@@ -432,9 +428,6 @@ def stack(experiments: Sequence[Experiment]) -> Experiment:
 
     Shapes with fewer points are padded to the longest by repeating their last point with
     weight 0. The stack's ``name`` is "": the names stay with the caller's list, in order.
-    The stack is meant for ``jax.vmap`` and ``jax.jit``; rebuilding it from concrete batched
-    arrays (``jax.tree_util.tree_map``, or returning it from ``vmap``) trips the one-experiment
-    checks of Actuation and TipLoad.
 
     Raises:
         ValueError: no experiments, a stacked one among them, or different numbers of tendons.
@@ -460,12 +453,11 @@ def stack(experiments: Sequence[Experiment]) -> Experiment:
     def stacked(get):
         return np.stack([np.asarray(get(e), dtype=float) for e in experiments])
 
-    return _assemble(
-        Experiment,
+    return Experiment(
         s=stacked(lambda e: pad(e.s)),
         position=stacked(lambda e: pad(e.position)),
-        act=_assemble(Actuation, tensions=stacked(lambda e: e.act.tensions), insertion=stacked(lambda e: e.act.insertion)),
-        load=_assemble(TipLoad, force=stacked(lambda e: e.load.force), moment=stacked(lambda e: e.load.moment)),
+        act=Actuation(stacked(lambda e: e.act.tensions), stacked(lambda e: e.act.insertion)),
+        load=TipLoad(stacked(lambda e: e.load.force), stacked(lambda e: e.load.moment)),
         tip_mass=stacked(lambda e: e.tip_mass),
         weight=stacked(lambda e: pad(e.weight, fill=0.0)),
         name="",

@@ -9,40 +9,30 @@ finite differences). ``finite_difference_compliance`` keeps the paper's method f
 from __future__ import annotations
 
 import dataclasses
-import functools
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .loads import Actuation, TipLoad
+from .checks import as_array, check_range
+from .loads import STANDARD_GRAVITY, Actuation, TipLoad
+from .options import DEFAULT_SOLVER, SolverOptions
 from .robot import SCALAR_FIELDS, Robot
-from .shooting import MAX_ITER, TOL, raise_if_failed, shoot, solve, solve_arguments
 from .so3 import rotation_columns
-
-
-def _tip_pose_jacobian(solve_at, w):
-    """(d(tip position, tip rotation vector)/dw, solution); (6, n), rotation part vee(dR R^T), world frame."""
-
-    def pose(w):
-        sol = solve_at(w)
-        return (sol.tip_position, sol.tip_rotation), sol
-
-    (Jp, JR), sol = jax.jacfwd(pose, has_aux=True)(w)
-    return jnp.concatenate([Jp, rotation_columns(JR, sol.tip_rotation)]), sol
-
-
-def _checked(J, sol, throw, solve_options):
-    """(J, sol), raising with ``throw`` or masking J with NaN when the solve did not converge."""
-    if throw:
-        raise_if_failed(sol, solve_options.get("tol", TOL), solve_options.get("max_iter", MAX_ITER))
-        return J, sol
-    return jnp.where(sol.converged, J, jnp.nan), sol
+from .solve import check_solution, solution_and_compliance, solve, solve_arguments
 
 
 def compliance(
-    robot: Robot, act: Actuation, load: TipLoad | None = None, *, full: bool = False, throw: bool = True, **solve_options
+    robot: Robot,
+    act: Actuation,
+    load: TipLoad | None = None,
+    *,
+    full: bool = False,
+    gravity=STANDARD_GRAVITY,
+    solver: SolverOptions = DEFAULT_SOLVER,
+    guess=None,
+    throw: bool = True,
 ):
     """Tip compliance CM = d p(L) / d F_e (eq. 41), exact, in m/N.
 
@@ -50,55 +40,53 @@ def compliance(
     CM itself (e.g. with respect to the insertion) go through forward-mode autodiff of the solve.
 
     Args:
-        robot, act, load: as for ``tdct.solve``; the compliance is taken about this tip load.
+        robot, act, load, gravity, solver, guess: as for ``tdct.solve``; the compliance is taken
+            about this tip load.
         full: return the 6x6 compliance d(tip position, tip rotation vector) / d(F_e, M_e) instead
             (blocks in m/N, m/(N m), rad/N, rad/(N m); rotation vector in the world frame).
-        throw: raise ``ConvergenceError`` if the solution did not converge (needs concrete values);
-            with False (under jit or vmap) a non-converged solution gives a matrix of NaN.
-        **solve_options: steps, gravity, transition, tendon_model, tol, max_iter, guess for ``tdct.solve``.
+        throw: raise ``ConvergenceError`` if the solve did not converge (default, as for
+            ``tdct.solve``); with False a non-converged solve gives a matrix of NaN.
 
     Returns:
         CM, shape (3, 3) (or (6, 6) with ``full``).
     """
-    J, _ = compliance_and_solution(robot, act, load, throw=throw, **solve_options)
-    return J if full else J[:3, :3]
+    C, _ = compliance_and_solution(robot, act, load, gravity=gravity, solver=solver, guess=guess, throw=throw)
+    return C if full else C[:3, :3]
 
 
-def compliance_and_solution(robot: Robot, act: Actuation, load: TipLoad | None = None, *, throw: bool = True, **solve_options):
+def compliance_and_solution(robot, act, load=None, *, gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True):
     """The 6x6 compliance of ``compliance(..., full=True)`` and the Solution it was taken at, in one solve."""
-    return _checked_call(_compliance, robot, act, load, throw, solve_options)
+    return _checked(_compliance, solve_arguments(robot, act, load, gravity, guess, solver), throw)
 
 
-def _checked_call(f, robot, act, load, throw, solve_options, *static):
-    """``_checked`` of f(leaves, tree, opts, *static) at the checked arguments of ``solve``."""
-    args, opts = solve_arguments(robot, act, load, **solve_options)
-    leaves, tree = jax.tree.flatten(args)
-    return _checked(*f(leaves, tree, opts, *static), throw, solve_options)
+def _checked(f, args, throw, *static):
+    """f(*args, *static) = (matrix, Solution), with ``throw`` applied, or the matrix masked with
+    NaN where the solve did not converge."""
+    M, sol = f(*args, *static)
+    check_solution(sol, args[-1], throw)
+    return jnp.where(sol.converged, M, jnp.nan), sol
 
 
-# The pytrees travel as their leaves: custom_jvp builds zero tangents by unflattening, and a Robot
-# of zeros would fail the Robot's own checks.
-@functools.partial(jax.jit, static_argnums=(1, 2))
-def _compliance(leaves, tree, opts):
-    return _compliance_from_root(leaves, tree, opts)
+@jax.jit
+def _compliance(robot, act, load, gravity, guess, solver):
+    return _compliance_from_root(robot, act, load, gravity, guess, solver)
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2))
-def _compliance_from_root(leaves, tree, opts):
-    sol, C = shoot(*jax.tree.unflatten(tree, leaves), opts)
+@jax.custom_jvp
+def _compliance_from_root(robot, act, load, gravity, guess, solver):
+    sol, C = solution_and_compliance(robot, act, load, gravity, guess, solver)
     return C, sol
 
 
 @_compliance_from_root.defjvp
-def _compliance_jvp(tree, opts, primals, tangents):
+def _compliance_jvp(primals, tangents):
     """Derivatives of the compliance: forward-mode autodiff of the compliance's own autodiff."""
-    return jax.jvp(lambda leaves: _pose_jacobian_of(leaves, tree, opts, "load"), primals, tangents)
+    return jax.jvp(lambda *args: pose_jacobian(*args, "load"), primals, tangents)
 
 
-def _pose_jacobian_of(leaves, tree, opts, wrt):
+def pose_jacobian(robot, act, load, gravity, guess, solver, wrt):
     """(d(tip pose) / dw, Solution) for w the tip load ("load"), the actuation ("actuation") or a
-    tuple of scalar Robot field names, at the solve arguments given as leaves of ``tree``."""
-    robot, act, load, *rest = jax.tree.unflatten(tree, leaves)
+    tuple of scalar Robot field names; the rotation part is vee(dR R^T) in the world frame, (6, n)."""
     if wrt == "load":
         w = jnp.concatenate([jnp.asarray(load.force), jnp.asarray(load.moment)])
 
@@ -117,23 +105,28 @@ def _pose_jacobian_of(leaves, tree, opts, wrt):
         def configure(w):
             return dataclasses.replace(robot, **dict(zip(wrt, w, strict=True))), act, load
 
-    return _tip_pose_jacobian(lambda w: shoot(*configure(w), *rest, opts)[0], w)
+    def pose(w):
+        sol = solution_and_compliance(*configure(w), gravity, guess, solver)[0]
+        return (sol.tip_position, sol.tip_rotation), sol
+
+    (Jp, JR), sol = jax.jacfwd(pose, has_aux=True)(w)
+    return jnp.concatenate([Jp, rotation_columns(JR, sol.tip_rotation)]), sol
 
 
-_pose_jacobian = jax.jit(_pose_jacobian_of, static_argnums=(1, 2, 3))
+_pose_jacobian = jax.jit(pose_jacobian, static_argnums=(6,))
 
 
-def kinematic_jacobian(robot: Robot, act: Actuation, load: TipLoad | None = None, *, throw: bool = True, **solve_options):
+def kinematic_jacobian(robot, act, load=None, *, gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True):
     """d(tip position [m], tip rotation vector [rad]) / d(tensions [N], insertion [m]), shape (6, n_t + 1).
 
     The last column is the tube insertion depth, a real differentiable input (one-sided at d = 0
     and d = L, where the solution extends smoothly). Arguments as for ``compliance``.
     """
-    return _checked_call(_pose_jacobian, robot, act, load, throw, solve_options, "actuation")[0]
+    return _checked(_pose_jacobian, solve_arguments(robot, act, load, gravity, guess, solver), throw, "actuation")[0]
 
 
 def parameter_jacobian(
-    robot: Robot, act: Actuation, load: TipLoad | None = None, *, params=("E_silicone",), throw: bool = True, **solve_options
+    robot, act, load=None, *, params=("E_silicone",), gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True
 ):
     """d(tip position, tip rotation vector) / d(scalar Robot fields named in ``params``), (6, len(params)).
 
@@ -142,21 +135,24 @@ def parameter_jacobian(
     for p in params:
         if p not in SCALAR_FIELDS:
             raise ValueError(f"params: {p!r} is not a scalar Robot field; allowed: {list(SCALAR_FIELDS)}")
-    return _checked_call(_pose_jacobian, robot, act, load, throw, solve_options, tuple(params))[0]
+    args = solve_arguments(robot, act, load, gravity, guess, solver)
+    return _checked(_pose_jacobian, args, throw, tuple(params))[0]
 
 
-def finite_difference_compliance(
-    robot: Robot, act: Actuation, load: TipLoad | None = None, *, step: float = 1e-4, **solve_options
-):
+def finite_difference_compliance(robot, act, load=None, *, step: float = 1e-4, gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER):
     """CM by central differences of the tip position over the three tip-force components (the
-    paper's method): 6 extra solves, each required to converge. ``step`` is in N."""
+    paper's method): 6 extra solves, each required to converge. ``step`` [N] is finite and > 0."""
+    step = as_array("step", step, ())
+    check_range("step", step, 0.0, lo_open=True, unit=" N")
     load = TipLoad() if load is None else load
     columns = []
     for k in range(3):
         dF = np.zeros(3)
         dF[k] = step
         tips = [
-            solve(robot, act, TipLoad(np.asarray(load.force) + sign * dF, load.moment), throw=True, **solve_options).tip_position
+            solve(
+                robot, act, TipLoad(np.asarray(load.force) + sign * dF, load.moment), gravity=gravity, solver=solver
+            ).tip_position
             for sign in (1.0, -1.0)
         ]
         columns.append((tips[0] - tips[1]) / (2 * step))

@@ -17,6 +17,7 @@ from .calibrate import levenberg_marquardt
 from .loads import Actuation, TipLoad
 from .manipulation import capacity, load_capacity, optimal_insertion
 from .mechanics import compliance, compliance_ellipsoid
+from .options import DEFAULT_SOLVER
 from .robot import Robot
 from .sweep import sweep
 
@@ -146,13 +147,13 @@ class Fit(NamedTuple):
 
 
 def fit_load_capacities(
-    robot: Robot, params=("tendon_offset",), *, max_iter: int = 12, tol: float = 1e-8, progress=print, **solve_options
+    robot: Robot, params=("tendon_offset",), *, max_steps: int = 12, xtol: float = 1e-8, progress=print, solver=DEFAULT_SOLVER
 ) -> Fit:
     """Fits Robot fields to the ten load capacities of Sec. V.A by Levenberg-Marquardt in log space.
 
     Residuals are relative misfits (model - paper) / paper; the Jacobian is exact (jacfwd through
-    the implicitly differentiated capacity root, vmapped over the ten conditions).
-    ``solve_options`` (steps, transition, tendon_model) go to ``manipulation.capacity``.
+    the implicitly differentiated capacity root, vmapped over the ten conditions). ``max_steps``
+    and ``xtol`` are the fit's own limit and tolerance; ``solver`` goes to every solve.
     """
     tensions = jnp.asarray(np.tile(tendon1(robot, CAPACITY_TENSIONS), (2, 1)))
     depths = jnp.repeat(jnp.asarray(CAPACITY_INSERTIONS), len(CAPACITY_TENSIONS))
@@ -160,21 +161,21 @@ def fit_load_capacities(
 
     def residual(log_values):
         r = dataclasses.replace(robot, **{p: jnp.exp(log_values[i]) for i, p in enumerate(params)})
-        c = jax.vmap(lambda t, d: capacity(r, Actuation(t, d), **solve_options))(tensions, depths)
+        c = jax.vmap(lambda t, d: capacity(r, Actuation(t, d), solver=solver, throw=False))(tensions, depths)
         misfit = (c.mass - target) / target
-        return misfit, (misfit, c.converged)
+        return misfit, (misfit, c.result)
 
     jac_and_res = jax.jit(jax.jacfwd(residual, has_aux=True))
 
     def evaluate(x):
-        J, (r, ok) = jac_and_res(x)
-        return np.asarray(r), np.asarray(J), bool(np.all(ok)), None
+        J, (r, codes) = jac_and_res(x)
+        return np.asarray(r), np.asarray(J), int(np.max(np.asarray(codes))), None
 
     def report(it, r, step):
         progress(f"  fit iteration {it}: rms misfit {100 * np.sqrt(np.mean(np.square(r))):.3f}%, step {np.abs(step).max():.2e}")
 
     x0 = np.log([float(getattr(robot, p)) for p in params])
-    fit = levenberg_marquardt(evaluate, x0, max_iter=max_iter, xtol=tol, callback=report if progress else None)
+    fit = levenberg_marquardt(evaluate, x0, max_steps=max_steps, xtol=xtol, callback=report if progress else None)
     mass = fit.residual * target + target
     return Fit(
         values={p: float(np.exp(fit.x[i])) for i, p in enumerate(params)},

@@ -7,7 +7,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from .shooting import Solution
+from .solve import Solution
 
 
 def _pyplot():

@@ -6,11 +6,11 @@ import dataclasses
 import tomllib
 from pathlib import Path
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import as_array, check_range, is_concrete
+from .checks import as_array, check_range, is_concrete
+from .tree import pytree, set_fields
 
 SCALAR_FIELDS = (
     "length",
@@ -29,8 +29,7 @@ SCALAR_FIELDS = (
 )
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree
 class Robot:
     """Geometry and materials of the TDCT robot, SI units; every field is a differentiable leaf.
 
@@ -72,15 +71,14 @@ class Robot:
     density_tube: float = 6450.0
 
     def __post_init__(self):
-        for name in SCALAR_FIELDS:
-            object.__setattr__(self, name, as_array(name, getattr(self, name), ()))
+        set_fields(self, **{name: as_array(name, getattr(self, name), ()) for name in SCALAR_FIELDS})
         angles = self.tendon_angles
         if is_concrete(angles):
             n = np.asarray(angles).size
             angles = as_array("tendon_angles", angles, (n,))
             if n == 0:
                 raise ValueError("tendon_angles must list at least one tendon, got an empty list")
-        object.__setattr__(self, "tendon_angles", angles)
+        set_fields(self, tendon_angles=angles)
         self._check()
 
     def _check(self):

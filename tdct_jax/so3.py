@@ -23,8 +23,3 @@ def rotation_columns(dR, R):
     """Columns vee(dR_k R^T) of the world-frame rotation vectors of the derivatives dR (3, 3, k) of R."""
     A = jnp.einsum("ijk,lj->ilk", dR, R)
     return jnp.stack([A[2, 1], A[0, 2], A[1, 0]])
-
-
-def tip_angle(R):
-    """Angle of the tangent R e3 in the world z-y plane from +z, positive toward +y [rad]."""
-    return jnp.arctan2(R[..., 1, 2], R[..., 2, 2])

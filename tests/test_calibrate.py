@@ -58,10 +58,10 @@ def test_joint_fit_recovers_modulus_and_tendon_offset(robot, start, measured):
 
 
 def test_calibration_that_runs_out_of_steps_says_so(start, measured):
-    fit = tdct.calibrate(start, measured, max_iter=1, progress=False)
-    assert not fit.converged and "max_iter" in fit.message
+    fit = tdct.calibrate(start, measured, max_steps=1, progress=False, throw=False)
+    assert not fit.converged and fit.result == tdct.status.OUTER_LIMIT and "max_steps" in fit.message
     with pytest.raises(tdct.ConvergenceError, match="E_silicone did not converge"):
-        tdct.calibrate(start, measured, max_iter=1, progress=False, throw=True)
+        tdct.calibrate(start, measured, max_steps=1, progress=False, throw=True)
 
 
 @pytest.mark.parametrize(
@@ -131,7 +131,7 @@ def test_cli_synth_then_calibrate_recovers_the_modulus(tmp_path, capsys):
     assert [e["name"] for e in out["experiments"]] == [f.stem.split("_", 1)[1] for f in files]
     assert [e["name"][:3] for e in out["experiments"]] == ["t2-", "t4-", "t6-", "t8-", "t10"]
     assert png.stat().st_size > 20_000
-    assert main(["calibrate", *map(str, files), "--quiet", "--max-iter", "1"]) == 1
+    assert main(["calibrate", *map(str, files), "--quiet", "--max-steps", "1"]) == 1
     assert "did not converge" in capsys.readouterr().err
     assert main(["calibrate", str(folder), "--params", "E_silcone"]) == 2
     assert "not a scalar Robot field" in capsys.readouterr().err
@@ -144,7 +144,7 @@ def test_interpolation_stays_well_within_the_accuracy_target_across_the_tube_end
     # still agree with a 400-step solution to a tenth of the 1 um accuracy target (2e-8 m at the
     # default 16 steps; taking the backbone's tangent on the silicone side gives about 5e-6 m).
     robot, act, load, sol = paper_case
-    fine = tdct.solve(robot, act, load, steps=400, throw=True)
+    fine = tdct.solve(robot, act, load, solver=tdct.SolverOptions(steps=400), throw=True)
     s = np.linspace(0.0, float(robot.length), 1601)
     between = np.linalg.norm(np.asarray(tdct.positions_at(sol, s)) - np.asarray(tdct.positions_at(fine, s)), axis=1)
     assert between.max() < 1e-7

@@ -13,7 +13,8 @@ import tdct_jax as tdct
 
 # 8 points in chunks of 2: each process's chunks hold the same points as the single process's
 GRID = {"insertion": [0.0, 0.05, 0.1, 0.16], "tensions": [[2.0, 0.0, 0.0, 0.0], [8.0, 0.0, 0.0, 1.0]]}
-OPTIONS = dict(chunk_size=2, steps=4, progress=False)
+OPTIONS_TEXT = "dict(chunk_size=2, solver=tdct.SolverOptions(steps=4), progress=False)"
+OPTIONS = eval(OPTIONS_TEXT)
 TIMEOUT_S = 300
 WORKER = (
     textwrap.dedent(
@@ -27,7 +28,7 @@ WORKER = (
     """
     )
     .replace("GRID", repr(GRID))
-    .replace("OPTIONS", repr(OPTIONS))
+    .replace("OPTIONS", OPTIONS_TEXT)
 )
 
 

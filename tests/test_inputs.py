@@ -1,5 +1,6 @@
 """Bad input gets a ValueError naming field, value and range; non-convergence is never silent."""
 
+import jax
 import numpy as np
 import pytest
 
@@ -59,9 +60,9 @@ def test_solve_checks_insertion_against_length_and_tendon_count(robot):
     with pytest.raises(ValueError, match="4 tendons"):
         tdct.solve(robot, tdct.Actuation(tensions=(1.0, 2.0, 3.0)))
     with pytest.raises(ValueError, match="transition"):
-        tdct.solve(robot, tdct.Actuation(), transition="smooth")
+        tdct.solve(robot, tdct.Actuation(), solver=tdct.SolverOptions(transition="smooth"))
     with pytest.raises(ValueError, match="steps"):
-        tdct.solve(robot, tdct.Actuation(), steps=0)
+        tdct.solve(robot, tdct.Actuation(), solver=tdct.SolverOptions(steps=0))
     with pytest.raises(ValueError, match="gravity must have shape"):
         tdct.solve(robot, tdct.Actuation(), gravity=(0.0, -9.81))
     with pytest.raises(TypeError, match="tdct.Actuation"):
@@ -87,13 +88,50 @@ def test_robot_toml(tmp_path):
         tdct.Robot.from_toml(tmp_path / "missing.toml")
 
 
-def test_non_convergence_is_loud(paper_case):
-    robot, act, load, _ = paper_case
-    sol = tdct.solve(robot, act, load, max_iter=1)
-    # One Newton step per load stage: the plain attempt, then ramps of 4 and 16 stages.
-    assert not bool(sol.converged) and 1 <= int(sol.iterations) <= 1 + 4 + 16
-    with pytest.raises(
-        tdct.ConvergenceError,
-        match=r"tip (force|moment) . residual .* > tol 1e-10 after \d+ iterations; raise max_iter \(now 1\)",
-    ):
-        tdct.solve(robot, act, load, max_iter=1, throw=True)
+FAILURES = {  # each failure kind, forced: (actuation, solver options, what the message says)
+    tdct.status.NEWTON_LIMIT: (
+        tdct.Actuation((6.0, 0, 0, 0), 0.08),
+        tdct.SolverOptions(max_iter=1),
+        r"Newton limit reached: Newton used its limit of max_iter = 1 steps per load stage .*"
+        r"\(\d+ steps in all; the loads were ramped in up to 16 stages\)\. Raise max_iter",
+    ),
+    tdct.status.CONTINUATION_EXHAUSTED: (
+        tdct.Actuation((6.0, 0, 0, 0), 0.08),
+        tdct.SolverOptions(tol=1e-18),  # below round-off: every step is rejected
+        r"load continuation exhausted: Newton stalled .* even with the loads ramped in 16 stages",
+    ),
+    tdct.status.NONFINITE: (
+        tdct.Actuation((400.0, 0, 0, 0), 0.0),  # 40x the calibrated range
+        tdct.SolverOptions(),
+        r"non-finite residual: the shooting residual is not finite",
+    ),
+}
+
+
+@pytest.mark.parametrize("code", FAILURES)
+def test_each_failure_kind_has_its_code_and_raises_its_own_message(robot, code):
+    act, solver, words = FAILURES[code]
+    load = tdct.TipLoad.from_mass(0.02)
+    sol = tdct.solve(robot, act, load, solver=solver, throw=False)
+    assert int(sol.result) == code and not bool(sol.converged)
+    # One Newton step per load stage at least: the plain attempt, then ramps of 4 and 16 stages.
+    assert int(sol.iterations) >= 3 and int(sol.stages) == 16
+    with pytest.raises(tdct.ConvergenceError, match=words) as e:
+        tdct.solve(robot, act, load, solver=solver)  # throw=True is the default
+    assert e.value.result == code
+
+
+def test_result_codes_per_lane_under_jit_and_vmap(robot):
+    tensions = np.array([[6.0, 0, 0, 0], [400.0, 0, 0, 0], [0.0, 3.0, 0, 0]])
+
+    def code(solver):
+        def one(tau):
+            return tdct.solve(robot, tdct.Actuation(tau, 0.0), solver=solver, throw=False).result
+
+        return np.asarray(jax.jit(jax.vmap(one))(tensions)).tolist()
+
+    assert code(tdct.SolverOptions()) == [tdct.status.SUCCESS, tdct.status.NONFINITE, tdct.status.SUCCESS]
+    assert code(tdct.SolverOptions(max_iter=1)) == [tdct.status.NEWTON_LIMIT] * 3
+    # throw=True inside the compiled program: the check runs there, lane by lane, with the message.
+    with pytest.raises(Exception, match=r"ConvergenceError: the shooting solve did not converge: non-finite residual"):
+        jax.jit(jax.vmap(lambda tau: tdct.solve(robot, tdct.Actuation(tau, 0.0)).tip_position))(tensions).block_until_ready()

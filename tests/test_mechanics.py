@@ -97,5 +97,5 @@ def test_bad_input_and_non_convergence_fail_loudly(robot):
         tdct.compliance(robot, tdct.Actuation(insertion=0.3))
     act, load = BENT
     with pytest.raises(tdct.ConvergenceError):
-        tdct.compliance(robot, act, load, max_iter=1)
-    assert np.all(np.isnan(tdct.compliance(robot, act, load, max_iter=1, throw=False)))
+        tdct.compliance(robot, act, load, solver=tdct.SolverOptions(max_iter=1))
+    assert np.all(np.isnan(tdct.compliance(robot, act, load, solver=tdct.SolverOptions(max_iter=1), throw=False)))

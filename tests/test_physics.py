@@ -130,7 +130,7 @@ def test_global_equilibrium_and_continuity_at_transition(robot, case):
 
 def test_paper_options_show_the_known_equilibrium_defect(robot):
     act, load = CASES["planar"]
-    sol = tdct.solve(robot, act, load, transition="paper", tendon_model="paper", throw=True)
+    sol = tdct.solve(robot, act, load, solver=tdct.SolverOptions(transition="paper", tendon_model="paper"), throw=True)
     f_err, m_err = _equilibrium_defect(robot, act, load, sol)
     print(f"paper transition: relative force defect {f_err:.3g}, moment defect {m_err:.3g}")
     assert f_err > 1e-4
@@ -138,7 +138,7 @@ def test_paper_options_show_the_known_equilibrium_defect(robot):
 
 def test_rk4_is_fourth_order(robot):
     act, load = tdct.Actuation(tensions=(10.0, 0, 0, 0), insertion=0.04), tdct.TipLoad.from_mass(0.05)
-    tips = {n: np.asarray(tdct.solve(robot, act, load, steps=n, throw=True).tip_position) for n in (10, 20, 80)}
+    tips = {n: np.asarray(tdct.solve(robot, act, load, solver=tdct.SolverOptions(steps=n)).tip_position) for n in (10, 20, 80)}
     e_coarse = np.linalg.norm(tips[10] - tips[80])
     e_fine = np.linalg.norm(tips[20] - tips[80])
     print(f"tip error {e_coarse:.3g} m at 10 steps, {e_fine:.3g} m at 20 (against 80): ratio {e_coarse / e_fine:.1f}")

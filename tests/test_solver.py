@@ -1,6 +1,8 @@
 """Solver behaviour: convergence over the operating envelope, vmap, gradients, no retracing."""
 
 import dataclasses
+import importlib
+import logging
 
 import jax
 import jax.numpy as jnp
@@ -8,7 +10,6 @@ import numpy as np
 from conftest import rel_err
 
 import tdct_jax as tdct
-from tdct_jax.shooting import shoot
 
 
 def envelope(n, seed=0):
@@ -44,12 +45,15 @@ def test_converges_over_the_operating_envelope(robot):
         np.testing.assert_allclose(sol.position[i], single.position, rtol=0, atol=1e-12)
 
 
-def test_no_retracing_when_only_values_change(paper_case):
+def test_no_retracing_when_only_values_change(paper_case, caplog):
     robot, act, load, _ = paper_case
-    before = shoot._cache_size()
-    for tau in (1.0, 2.0, 3.0):
-        tdct.solve(dataclasses.replace(robot, E_silicone=tau * 1e6), tdct.Actuation((tau, 0, 0, 0), 0.01 * tau), load)
-    assert shoot._cache_size() == before
+    with jax.log_compiles(), caplog.at_level(logging.WARNING, logger="jax"):
+        for tau in (1.0, 2.0, 3.0):
+            solver = tdct.SolverOptions(tol=1e-10 * tau, max_iter=40 + int(tau))  # leaves: no recompile either
+            r = dataclasses.replace(robot, E_silicone=tau * 1e6)
+            tdct.solve(r, tdct.Actuation((tau, 0, 0, 0), 0.01 * tau), load, solver=solver)
+    compiles = [r.getMessage() for r in caplog.records if "Compiling" in r.getMessage()]
+    assert not any("solution_and_compliance" in m for m in compiles), compiles
 
 
 def test_reverse_and_forward_gradients_agree_with_central_differences(paper_case):
@@ -79,15 +83,18 @@ def test_unrolled_spd_solve_matches_lapack_on_a_batch():
 
 
 def test_single_solves_go_to_the_cpu_where_a_gpu_is_the_default(robot, monkeypatch):
-    from tdct_jax import shooting
+    solve = importlib.import_module("tdct_jax.solve")
+
+    def arguments(gravity=tdct.STANDARD_GRAVITY):
+        return solve.solve_arguments(robot, tdct.Actuation(), None, gravity, None, tdct.SolverOptions())
 
     cpu, put = jax.local_devices(backend="cpu")[0], []
     real_put = jax.device_put
-    monkeypatch.setattr(shooting.jax, "device_put", lambda x, device: put.append(device) or real_put(x, device))
-    args, _ = shooting.solve_arguments(robot, tdct.Actuation())
+    monkeypatch.setattr(solve.jax, "device_put", lambda x, device: put.append(device) or real_put(x, device))
+    arguments()
     assert put == []  # the CPU is the default: nothing to move
-    monkeypatch.setattr(shooting.jax, "default_backend", lambda: "gpu")
-    args, _ = shooting.solve_arguments(robot, tdct.Actuation())
+    monkeypatch.setattr(solve.jax, "default_backend", lambda: "gpu")
+    args = arguments()
     assert put == [cpu] and args[3].devices() == {cpu}  # gravity: jit runs where committed arguments are
-    jax.jit(lambda g: shooting.solve_arguments(robot, tdct.Actuation(), gravity=g)[0][3])(np.zeros(3))
+    jax.jit(lambda g: arguments(g)[3])(np.zeros(3))
     assert put == [cpu]  # traced arguments (jit, vmap, sweeps) stay where they are

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 import tdct_jax as tdct
-from tdct_jax.shooting import STEPS
+
+STEPS = tdct.SolverOptions().steps
 
 BASE = tdct.Actuation((6.0, 0.0, 0.0, 2.0), 0.0)
 GRID = {"insertion": np.array([0.0, 0.08, 0.16]), "tip_mass": np.array([0.0, 0.03])}
@@ -110,7 +111,8 @@ def test_sharded_sweep_on_two_devices_equals_one_device():
     np.testing.assert_allclose(out["two"], out["one"], rtol=0, atol=1e-15)
 
 
-STREAM = dict(grid=GRID, chunk_size=4, steps=4, progress=False)  # 6 points: a full chunk and a padded one
+# 6 points: a full chunk and a padded one
+STREAM = dict(grid=GRID, chunk_size=4, solver=tdct.SolverOptions(steps=4), progress=False)
 
 
 @pytest.fixture(scope="module")
@@ -156,7 +158,7 @@ def test_chunks_arrive_in_order_and_join_to_the_sweep(robot, small_chunk_sweep):
 def test_parts_of_a_warm_started_sweep_gather_to_the_whole(robot, tmp_path, monkeypatch):
     """Two processes, simulated in this one: each writes its paths; gather joins them."""
     grid = {"tip_mass": np.array([0.0, 0.02, 0.04]), "tensions": np.outer([0.0, 5.0], [1.0, 0.0, 0.0, 0.0])}
-    options = dict(grid=grid, warm_start=True, chunk_size=1, steps=4, progress=False)
+    options = dict(grid=grid, warm_start=True, chunk_size=1, solver=tdct.SolverOptions(steps=4), progress=False)
     whole = tdct.sweep(robot, **options)
     for k in range(2):
         monkeypatch.setattr(jax, "process_count", lambda: 2)

@@ -1,0 +1,136 @@
+"""The batch engine: a per-point function run as one compiled ``jax.vmap`` over chunks of points,
+sharded over this process's devices, with a progress bar. No physics: sweeps, load capacities and
+optimal insertions bring their own per-point kernels."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Iterator
+
+import jax
+import numpy as np
+from jax.sharding import Mesh
+from jax.sharding import PartitionSpec as P
+from tqdm import tqdm
+
+from .checks import check_integer
+
+CHUNK_SIZES = {"cpu": 64, "gpu": 8192}
+"""Default configurations per compiled call, by device platform (``chunk_size=`` overrides; a
+smaller batch rounds up to a power of two; other platforms take the cpu value). cpu: 64 measured
+fastest on one device of the 2-core CPU (664 solves/s against 569, 650 and 440 at 16, 256 and
+1,024; benchmarks/sweep_throughput.py). gpu: provisional, near the best batch of a batch-last
+prototype on one H100 (benchmarks/README.md), until benchmarks/gpu_throughput.py measures it."""
+AXIS = "batch"
+"""Name of the device-mesh axis the batch is sharded over."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Kernel:
+    """What runs per point (static: each distinct value compiles once per chunk size).
+
+    ``function(base, point, kernel)`` returns a dict of arrays for one point; ``base`` is the
+    pytree every point shares (robot, actuation, load, gravity, solver options, ...).
+    ``options`` are hashable settings the function reads (e.g. which outputs to return).
+    """
+
+    function: Callable
+    options: tuple = ()
+    mesh: Mesh | None = None
+
+    def option(self, name: str, default=None):
+        return dict(self.options).get(name, default)
+
+
+@jax.jit(static_argnames=("kernel",))
+def _run_chunk(base, points, kernel: Kernel):
+    def lanes(base, points):
+        return jax.vmap(lambda p: kernel.function(base, p, kernel))(points)
+
+    if kernel.mesh is None or kernel.mesh.size == 1:
+        return lanes(base, points)
+    sharded = jax.shard_map(lanes, mesh=kernel.mesh, in_specs=(P(), P(AXIS)), out_specs=P(AXIS), check_vma=False)
+    return sharded(base, points)
+
+
+def mesh_for(devices) -> Mesh:
+    """A 1-D mesh over ``devices`` (default: this process's devices, ``jax.local_devices()``)."""
+    return Mesh(np.asarray(jax.local_devices() if devices is None else list(devices)), (AXIS,))
+
+
+def default_chunk_size(mesh: Mesh | None = None) -> int:
+    """``CHUNK_SIZES`` for the platform of the mesh's devices (default: the default backend's)."""
+    platform = jax.default_backend() if mesh is None else mesh.devices.flat[0].platform
+    return CHUNK_SIZES.get(platform, CHUNK_SIZES["cpu"])
+
+
+def lanes_per_call(n: int, chunk_size: int, n_devices: int = 1) -> int:
+    """Configurations per compiled call for n points: ``chunk_size``, or the power of two at or
+    above n when that is smaller, rounded up to a multiple of the device count."""
+    chunk = min(chunk_size, 1 << max(n - 1, 0).bit_length())
+    return -(-chunk // n_devices) * n_devices
+
+
+def iter_batched(
+    kernel: Kernel, base, points: dict, *, chunk_size=None, progress=True, desc="solving", per_point=1
+) -> Iterator[tuple[int, dict]]:
+    """Runs ``kernel`` over the leading axis of ``points`` in chunks, yielding each chunk's
+    (first row, numpy outputs) as soon as it is computed, with the next chunk already dispatched.
+
+    Every chunk has the same static shape (the last is padded by repeating its final point), so
+    one compile serves the whole batch and any later one with the same chunk size.
+    ``chunk_size`` None takes ``default_chunk_size`` for the kernel's devices. ``per_point`` is
+    the number of solves each point stands for (the progress bar counts solves).
+    """
+    if chunk_size is None:
+        chunk_size = default_chunk_size(kernel.mesh)
+    check_integer("chunk_size", chunk_size)
+    n = len(next(iter(points.values())))
+    chunk = lanes_per_call(n, chunk_size, 1 if kernel.mesh is None else kernel.mesh.size)
+    # one device: commit the points to it, so jit runs there and not on the default device
+    device = kernel.mesh.devices.flat[0] if kernel.mesh is not None and kernel.mesh.size == 1 else None
+
+    def fetched(start, out):
+        m = min(chunk, n - start)
+        out = {k: v[:m] for k, v in jax.device_get(out).items()}
+        bar.update(m * per_point)
+        bar.set_postfix_str("")
+        return start, out
+
+    with tqdm(total=n * per_point, unit="solve", desc=desc, disable=not progress, dynamic_ncols=True) as bar:
+        bar.set_postfix_str("compiling")
+        pending = None
+        for start in range(0, n, chunk):
+            index = np.minimum(np.arange(start, start + chunk), n - 1)
+            chunk_points = {k: v[index] for k, v in points.items()}
+            if device is not None:
+                chunk_points = jax.device_put(chunk_points, device)
+            out = _run_chunk(base, chunk_points, kernel)  # dispatched: runs while the last chunk is fetched
+            if pending is not None:
+                yield fetched(*pending)
+            pending = start, out
+        yield fetched(*pending)
+
+
+def run_batched(kernel: Kernel, base, points: dict, **options) -> dict:
+    """``iter_batched``'s chunks joined: numpy outputs over the whole leading axis of ``points``."""
+    return joined([out for _, out in iter_batched(kernel, base, points, **options)])
+
+
+def batch_options(*, chunk_size=None, progress=True, devices=None):
+    """The batching options of the grid entry points (as for ``tdct.sweep``), checked; returns
+    run(kernel, base, points, desc) -> joined numpy outputs, with those options applied."""
+    if chunk_size is not None:
+        check_integer("chunk_size", chunk_size)
+    mesh = mesh_for(devices)
+
+    def run(kernel: Kernel, base, points: dict, desc: str) -> dict:
+        kernel = dataclasses.replace(kernel, mesh=mesh)
+        return run_batched(kernel, base, points, chunk_size=chunk_size, progress=progress, desc=desc)
+
+    return run
+
+
+def joined(parts: list[dict]) -> dict:
+    """Chunks' outputs (dicts of arrays with a leading point axis) concatenated along that axis."""
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}

@@ -1,0 +1,113 @@
+"""Damped Newton with load continuation, for any F(x) -> (residual, outputs): no physics."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from . import status
+
+MU_START = 1e-5
+"""Initial Levenberg-Marquardt damping."""
+MU_STALL = 1e6
+"""Damping at which Newton gives up on a stage: 11 rejected steps in a row from the start value;
+the steps it would still take are too short to matter."""
+STAGES = (1, 4, 16)
+"""Load continuation: numbers of equal load stages tried in turn when Newton fails."""
+
+_STALLED = -1  # Newton's own code for a stall; continuation reports it as CONTINUATION_EXHAUSTED
+
+
+class Root(NamedTuple):
+    """What ``continuation`` found.
+
+    x: the last accepted point (the root when ``result`` is SUCCESS).
+    residual: F's residual there. jacobians: d(residual, outputs) / dx there, from the same pass.
+    iterations: Newton steps over all stages. stages: the number of load stages of the last ramp.
+    result: a ``status`` code.
+    """
+
+    x: jax.Array
+    residual: jax.Array
+    jacobians: object
+    iterations: jax.Array
+    stages: jax.Array
+    result: jax.Array
+
+
+def newton(F, x0, J0, tol, max_iter):
+    """Levenberg-Marquardt-damped Newton on F(x)[0] = 0 with exact ``jax.jacfwd`` Jacobians.
+
+    F returns (residual, outputs); Newton also carries the Jacobian of the outputs, taken in the
+    same forward pass. The damping mu shrinks tenfold after each step that lowers |F| and grows
+    tenfold after each that does not, so the iteration is Newton's (quadratic) near the root and a
+    short gradient step far from it; it stops when mu reaches MU_STALL. The first pass evaluates
+    x0 itself, so the Jacobian code appears once in the compiled loop and the last Jacobians are
+    at the returned point. J0 (zeros shaped like the Jacobians) only sets their shapes.
+
+    Returns:
+        (x, residual, jacobians, Newton steps taken, code): SUCCESS, NEWTON_LIMIT, NONFINITE or
+        a stall.
+    """
+
+    def value_and_jac(x):
+        def fr(x):
+            out = F(x)
+            return out, out[0]
+
+        return jax.jacfwd(fr, has_aux=True)(x)
+
+    def not_done(c):
+        x, r, J, mu, it, x_try = c
+        return (it == 0) | ((it <= max_iter) & (jnp.max(jnp.abs(r)) > tol) & (mu < MU_STALL))
+
+    def body(c):
+        x, r, J, mu, it, x_try = c
+        J_try, r_try = value_and_jac(x_try)
+        ok = jnp.all(jnp.isfinite(r_try)) & (jnp.sum(r_try**2) < jnp.sum(r**2))
+        x, r, J = jax.tree.map(lambda new, old: jnp.where(ok, new, old), (x_try, r_try, J_try), (x, r, J))
+        mu = jnp.where(ok, mu / 10, mu * 10)
+        J_r = J[0]
+        x_try = x - jnp.linalg.solve(J_r.T @ J_r + mu * jnp.eye(x.size), J_r.T @ r)
+        return x, r, J, mu, it + 1, x_try
+
+    init = (x0, jnp.full(x0.size, jnp.inf), J0, jnp.asarray(MU_START), 0, x0)
+    x, r, J, mu, it, _ = lax.while_loop(not_done, body, init)
+    code = jnp.where(
+        jnp.max(jnp.abs(r)) <= tol,
+        status.SUCCESS,
+        jnp.where(~jnp.all(jnp.isfinite(r)), status.NONFINITE, jnp.where(mu >= MU_STALL, _STALLED, status.NEWTON_LIMIT)),
+    )
+    return x, r, J, it - 1, code
+
+
+def continuation(F_at, x0, x_ramp, tol, max_iter) -> Root:
+    """Solves F_at(1)(x)[0] = 0 from x0, ramping the loads in stages when plain Newton fails.
+
+    F_at(lam) gives the residual (and outputs, see ``newton``) with every load scaled by lam. The
+    ramps of STAGES are tried in turn: K equal stages lam = 1/K, ..., 1, each started from the last
+    root, the first from lam * x_ramp (a start that is linear in the loads, e.g. the straight rod).
+    """
+    n = x0.size
+    J0 = jax.tree.map(lambda o: jnp.zeros(jnp.shape(o) + (n,)), jax.eval_shape(F_at(1.0), x0))
+
+    def not_done(c):
+        return ~c[-2]
+
+    def body(c):
+        x, r, it, J, K, stage, _, _ = c
+        lam = stage / K
+        guess = jnp.where(stage == 1, jnp.where(K == STAGES[0], x0, lam * x_ramp), x)
+        x_new, r_new, J_new, it_new, code = newton(F_at(lam), guess, J0, tol, max_iter)
+        ok = code == status.SUCCESS
+        K_next = jnp.where(ok, K, K * (STAGES[1] // STAGES[0]))
+        stage_next = jnp.where(ok, stage + 1, 1)
+        done = (ok & (stage == K)) | (K_next > STAGES[-1])
+        return x_new, r_new, it + it_new, J_new, jnp.where(done, K, K_next), stage_next, done, code
+
+    init = (x0, jnp.full(n, jnp.inf), jnp.zeros((), jnp.int32), J0, STAGES[0], 1, False, status.SUCCESS)
+    x, r, it, J, K, _, _, code = lax.while_loop(not_done, body, init)
+    return Root(x, r, J, it, K, jnp.where(code == _STALLED, status.CONTINUATION_EXHAUSTED, code).astype(jnp.int32))

@@ -1,0 +1,56 @@
+"""How a static shape is computed: SolverOptions, accepted as ``solver=`` by every entry point."""
+
+from __future__ import annotations
+
+from .checks import as_array, check_choice, check_integer, check_range, is_concrete
+from .tree import pytree, set_fields, static
+
+TRANSITIONS = ("balanced", "paper")
+TENDON_MODELS = ("exact", "paper")
+STEPS = 16
+"""Default RK4 steps per segment (benchmarks/accuracy_steps.py measures the tip error it leaves)."""
+TOL = 1e-10
+"""Default convergence threshold on the scaled tip residual (max norm)."""
+MAX_ITER = 50
+"""Default limit on Newton steps per load stage."""
+
+
+@pytree
+class SolverOptions:
+    """The discrete model and the Newton shooting iteration (docs/model.md).
+
+    ``steps``, ``transition`` and ``tendon_model`` shape the compiled program (each distinct value
+    compiles once); ``tol`` and ``max_iter`` are leaves, so changing them does not recompile.
+
+    Attributes:
+        steps: RK4 steps per segment (backbone [0, d] and silicone-only [d, L]).
+        transition: "balanced" (total rod + tendon force and moment continuous at s = d) or
+            "paper" (rod force and moment continuous, eqs. 31-32 as printed).
+        tendon_model: tendon load in the backbone segment, "exact" (Rucker-Webster, tangents
+            tilted by u x r_t) or "paper" (eqs. 21-22 as printed).
+        tol: convergence threshold on the scaled tip residual (force / typical force, moment /
+            (typical force x L)), max norm; finite and > 0.
+        max_iter: most Newton steps per load stage; when a stage fails the loads are ramped in
+            1, 4, then 16 stages (``Solution.iterations`` counts all steps).
+    """
+
+    steps: int = static(default=STEPS)
+    transition: str = static(default="balanced")
+    tendon_model: str = static(default="exact")
+    tol: float = TOL
+    max_iter: int = MAX_ITER
+
+    def __post_init__(self):
+        set_fields(self, steps=check_integer("steps", self.steps))
+        check_choice("transition", self.transition, TRANSITIONS)
+        check_choice("tendon_model", self.tendon_model, TENDON_MODELS)
+        if is_concrete(self.tol):
+            tol = as_array("tol", self.tol, ())
+            check_range("tol", tol, 0.0, lo_open=True)
+            set_fields(self, tol=float(tol))
+        if is_concrete(self.max_iter):
+            set_fields(self, max_iter=check_integer("max_iter", self.max_iter))
+
+
+DEFAULT_SOLVER = SolverOptions()
+"""The defaults of every entry point's ``solver=``."""

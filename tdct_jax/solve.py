@@ -1,0 +1,243 @@
+"""The static shape: ``solve`` and the Solution it returns (paper Sec. II; docs/model.md)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from . import status
+from .checks import as_array, check_range, is_concrete
+from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
+from .options import DEFAULT_SOLVER, SolverOptions
+from .robot import Robot
+from .segments import Segment, State, rod_force, strains
+from .shooting import force_scale, root, segments, shoot
+from .so3 import rotation_columns
+from .tree import pytree
+
+
+def tip_angle(R):
+    """theta_tip: the angle of the tangent R e3 in the world z-y plane from +z, toward +y [rad]."""
+    return jnp.arctan2(R[..., 1, 2], R[..., 2, 2])
+
+
+@pytree
+class Solution:
+    """Static shape of the robot at the RK4 nodes (2 * steps + 1 of them, s = d appears once).
+
+    Attributes:
+        s: arc length of the undeformed robot [m], (n,).
+        position: p(s) [m], world frame, (n, 3).
+        rotation: R(s), body to world, (n, 3, 3).
+        force, moment: the rod's internal force n(s) [N] and moment m(s) [N m], world frame.
+        total_force, total_moment: rod plus tendons, N(s) and M(s); at s = 0 the load on the base.
+        strain, curvature: v(s) and u(s) [1/m], body frame.
+        residual: scaled tip residual (force rows, then moment rows), (6,).
+        residual_norm: its max norm.
+        iterations: Newton steps over all load stages.
+        stages: load stages of the last ramp tried (1, 4 or 16, see SolverOptions.max_iter).
+        result: a ``tdct_jax.status`` code: SUCCESS (0), NEWTON_LIMIT, CONTINUATION_EXHAUSTED or
+            NONFINITE; ``message`` says what it means and what to do.
+    """
+
+    s: jax.Array
+    position: jax.Array
+    rotation: jax.Array
+    force: jax.Array
+    moment: jax.Array
+    total_force: jax.Array
+    total_moment: jax.Array
+    strain: jax.Array
+    curvature: jax.Array
+    residual: jax.Array
+    residual_norm: jax.Array
+    iterations: jax.Array
+    stages: jax.Array
+    result: jax.Array
+
+    @property
+    def converged(self):
+        """result == SUCCESS: the scaled tip residual is at most the tolerance."""
+        return self.result == status.SUCCESS
+
+    @property
+    def tip_position(self):
+        """p(L) [m], (3,)."""
+        return self.position[..., -1, :]
+
+    @property
+    def tip_rotation(self):
+        """R(L), (3, 3)."""
+        return self.rotation[..., -1, :, :]
+
+    @property
+    def base_wrench(self):
+        """(N(0), M(0)): the total force and moment at the base, the shooting unknowns, (6,)."""
+        return jnp.concatenate([self.total_force[..., 0, :], self.total_moment[..., 0, :]], axis=-1)
+
+    @property
+    def tip_angle(self):
+        """theta_tip: the tip tangent's angle in the z-y plane from +z, toward +y [rad]."""
+        return tip_angle(self.tip_rotation)
+
+
+@jax.jit
+def solution_and_compliance(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: SolverOptions):
+    """The compiled solve: the Solution, and the 6x6 tip compliance d(tip position, tip rotation
+    vector) / d(F_e, M_e) (eq. 41) from Newton's Jacobians at the root, for one 6x6 solve more.
+
+    The compliance is exact in value but has no derivatives of its own (``tdct.compliance``
+    supplies them). Unchecked: ``solve_arguments`` checks the arguments.
+    """
+    x, info = root(robot, act, load, gravity, guess, solver)
+    J_res, (J_p, J_R) = info.jacobians
+    F_c = force_scale(robot, act, load, gravity)
+    res, ys = shoot(robot, act, load, gravity, solver, x, F_c, path=True)
+    sol = _assemble(robot, act, solver, ys, res, info)
+    # The tip load enters only the residual: d res / d(F_e, M_e) = -diag(1 / F_c, 1 / (F_c L)).
+    dx_dw = jnp.linalg.solve(J_res, jnp.diag(jnp.repeat(jnp.stack([1 / F_c, 1 / (F_c * robot.length)]), 3)))
+    C = jnp.concatenate([J_p @ dx_dw, rotation_columns(J_R @ dx_dw, sol.tip_rotation)])
+    return sol, C
+
+
+def _node_quantities(back: Segment, sil: Segment, y: State, in_backbone):
+    """Strains v, u and rod force n, m at one node, by the segment the node belongs to."""
+
+    def with_segment(seg):
+        v, u = strains(seg, y.R, y.N, y.M)
+        return (v, u, *rod_force(seg, y, v, u))
+
+    return jax.tree.map(lambda a, b: jnp.where(in_backbone, a, b), with_segment(back), with_segment(sil))
+
+
+def _assemble(robot, act, solver, ys: State, res, info) -> Solution:
+    """Solution from the node states: strains and rod forces by each node's own segment."""
+    back, sil = segments(robot, act, solver)
+    n_b = solver.steps + 1
+    d, L = act.insertion, robot.length
+    s = jnp.concatenate([jnp.linspace(0.0, 1.0, n_b) * d, d + jnp.linspace(0.0, 1.0, n_b)[1:] * (L - d)])
+    in_backbone = jnp.where(jnp.arange(s.size) < n_b, d > 0, d >= L)
+
+    # lax.map: a vmap here, inside a sweep's vmap of 16 or more lanes, deadlocks XLA:CPU (jax 0.10.2).
+    v, u, n, m = lax.map(lambda a: _node_quantities(back, sil, *a), (ys, in_backbone))
+    return Solution(
+        s=s,
+        position=ys.p,
+        rotation=ys.R,
+        force=n,
+        moment=m,
+        total_force=ys.N,
+        total_moment=ys.M,
+        strain=v,
+        curvature=u,
+        residual=res,
+        residual_norm=jnp.max(jnp.abs(res)),
+        iterations=info.iterations,
+        stages=info.stages,
+        result=info.result,
+    )
+
+
+def solve(
+    robot: Robot,
+    act: Actuation,
+    load: TipLoad | None = None,
+    *,
+    gravity=STANDARD_GRAVITY,
+    solver: SolverOptions = DEFAULT_SOLVER,
+    guess=None,
+    throw: bool = True,
+) -> Solution:
+    """Static shape of the TDCT robot (paper Sec. II; docs/model.md) by Newton shooting.
+
+    The six unknowns are the total force and moment at the base, started from the straight rod.
+    Derivatives of every output with respect to every input (robot fields, tensions, insertion,
+    tip load, gravity) come from implicit differentiation of the converged root, so ``jax.grad``,
+    ``jax.jacfwd`` and ``jax.vmap`` pass straight through.
+
+    Args:
+        robot: geometry and materials.
+        act: tendon tensions [N] and tube insertion depth [m].
+        load: tip force [N] and moment [N m] in the world frame; none by default.
+        gravity: world gravity [m/s^2]; None or zeros switch the robot's weight off.
+        solver: steps, transition, tendon model, tolerance and Newton limit (SolverOptions).
+        guess: base force and moment (N(0) [N], M(0) [N m]), shape (6,), to start Newton from,
+            e.g. a neighbouring solution's ``base_wrench``; None starts from the straight rod.
+        throw: raise ConvergenceError when the solve did not converge (the default, as for every
+            entry point; inside jit or vmap the check runs in the compiled program). With False,
+            check ``sol.result`` / ``sol.converged``.
+
+    Returns:
+        Solution.
+
+    Raises:
+        ValueError: bad input (names field, value and allowed range).
+        ConvergenceError: with ``throw``, the result code's message (what failed, what to do).
+    """
+    sol = solution_and_compliance(*solve_arguments(robot, act, load, gravity, guess, solver))[0]
+    check_solution(sol, solver, throw)
+    return sol
+
+
+def check_solution(sol: Solution, solver: SolverOptions, throw: bool, what: str = "the shooting solve") -> None:
+    """``status.check`` of a Solution (or a batch of them), with its numbers in the message."""
+    status.check(
+        sol.result,
+        throw=throw,
+        what=what,
+        iterations=sol.iterations,
+        stages=sol.stages,
+        residual_norm=sol.residual_norm,
+        max_iter=solver.max_iter,
+        tol=solver.tol,
+    )
+
+
+def solve_arguments(robot, act, load, gravity, guess, solver) -> tuple:
+    """Checks a single solve's arguments; returns those of ``solution_and_compliance``."""
+    load = TipLoad() if load is None else load
+    check_inputs(robot, act, load, solver)
+    guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
+    gravity, guess = _on_cpu(gravity_vector(gravity), guess)
+    return robot, act, load, gravity, guess, solver
+
+
+def _on_cpu(*arrays):
+    """The arrays committed to the CPU where another backend (a GPU) is the default, so that the
+    solve they enter runs there (jit runs where its committed arguments are; the pytrees' numpy
+    leaves follow). One solve is a long chain of small operations, each a kernel launch on a GPU,
+    and faster on the CPU. Traced arrays (the caller's jit or vmap, and so sweeps) stay as they are."""
+    if jax.default_backend() == "cpu" or not all(is_concrete(a) for a in arrays):
+        return arrays
+    return jax.device_put(arrays, jax.local_devices(backend="cpu")[0])
+
+
+def check_inputs(robot: Robot, act: Actuation, load: TipLoad, solver: SolverOptions, *, batch: bool = False) -> None:
+    """Types, and the cross-checks between robot and inputs that the pytrees cannot make alone.
+
+    Without ``batch``, concrete inputs must be one configuration (no batch axes).
+    """
+    for name, obj, cls in (
+        ("robot", robot, Robot),
+        ("act", act, Actuation),
+        ("load", load, TipLoad),
+        ("solver", solver, SolverOptions),
+    ):
+        if not isinstance(obj, cls):
+            raise TypeError(f"{name} must be a tdct.{cls.__name__}, got {type(obj).__name__}")
+    if np.shape(act.tensions)[-1:] != (robot.n_tendons,):
+        raise ValueError(
+            f"tensions has shape {np.shape(act.tensions)}: the robot has {robot.n_tendons} tendons, one tension each"
+        )
+    if not batch:
+        for name, x, core in (("tensions", act.tensions, 1), ("insertion", act.insertion, 0), ("force", load.force, 1)):
+            if is_concrete(x) and np.ndim(x) > core:
+                raise ValueError(
+                    f"{name} has shape {np.shape(x)}: one configuration is expected here; "
+                    "solve a batch with tdct.sweep or jax.vmap"
+                )
+    if is_concrete(act.insertion) and is_concrete(robot.length):
+        L = float(robot.length)
+        check_range("insertion", act.insertion, 0.0, L, unit=f" m (0 to the robot length {L:g} m)")

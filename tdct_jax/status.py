@@ -1,0 +1,117 @@
+"""Result codes: how an iteration ended, computed inside the compiled program (so they work under
+jit and vmap), the message that says what to do about each, and the one place ``throw`` applies."""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+
+from .checks import is_concrete
+
+SUCCESS = 0
+"""Converged: the residual met the tolerance."""
+NEWTON_LIMIT = 1
+"""Newton used its ``max_iter`` steps in a load stage and the last load ramp without converging."""
+CONTINUATION_EXHAUSTED = 2
+"""Newton stalled (its damping grew without lowering the residual) in every load ramp."""
+NONFINITE = 3
+"""The residual is NaN or infinite at every point Newton could try."""
+OUTER_LIMIT = 4
+"""An outer iteration (load capacity, insertion optimum, inverse kinematics, calibration) used its
+``max_steps`` without meeting its own tolerance."""
+
+NAMES = {
+    SUCCESS: "converged",
+    NEWTON_LIMIT: "Newton limit reached",
+    CONTINUATION_EXHAUSTED: "load continuation exhausted",
+    NONFINITE: "non-finite residual",
+    OUTER_LIMIT: "outer iteration limit reached",
+}
+
+_ADVICE = {
+    NEWTON_LIMIT: (
+        "Newton used its limit of max_iter = {max_iter} steps per load stage without bringing the scaled tip residual "
+        "({residual_norm:.3g}) below tol = {tol:g} ({iterations} steps in all; the loads were ramped in up to {stages} "
+        "stages). Raise max_iter (SolverOptions(max_iter=...), or --max-iter), or start from a nearby solution (guess=)."
+    ),
+    CONTINUATION_EXHAUSTED: (
+        "Newton stalled (its damping grew without lowering the scaled tip residual {residual_norm:.3g} below tol = {tol:g}) "
+        "even with the loads ramped in {stages} stages ({iterations} steps in all). The configuration is probably beyond "
+        "what the model can reach (a looped or buckled shape), or tol is below what float64 round-off allows: check the "
+        "inputs and tol, or approach the configuration from a nearby converged solution (guess=)."
+    ),
+    NONFINITE: (
+        "the shooting residual is not finite (NaN or inf) after {iterations} Newton steps: the inputs are probably extreme "
+        "(check the robot fields, tensions and loads)."
+    ),
+    OUTER_LIMIT: (
+        "{what} used its max_steps = {max_steps} without meeting its tolerance; raise max_steps or start nearer the answer."
+    ),
+}
+
+
+class ConvergenceError(RuntimeError):
+    """An iteration did not converge (raised with ``throw=True``); ``result`` is its code."""
+
+    def __init__(self, message: str, result: int):
+        super().__init__(message)
+        self.result = result
+
+
+def message(result: int, **context) -> str:
+    """What went wrong and what to do, for one result code; ``context`` fills in the numbers."""
+    result = int(result)
+    if result == SUCCESS:
+        return NAMES[SUCCESS]
+    template = _ADVICE.get(result)
+    if template is None:
+        return f"unknown result code {result}"
+    return f"{NAMES[result]}: " + template.format_map(_Context(context))
+
+
+class _Context(dict):
+    """Format values; a number the caller could not supply prints as '?'."""
+
+    def __missing__(self, key):
+        return _Unknown()
+
+
+class _Unknown:
+    def __format__(self, spec):
+        return "?"
+
+
+def check(result, *, throw: bool, what: str = "the solve", **context) -> None:
+    """The one place ``throw`` applies: with ``throw``, raises ConvergenceError for the first
+    failing entry of ``result`` (any shape), its message filled in from ``context`` (scalars, or
+    arrays shaped like ``result``, e.g. iterations, stages, residual_norm, max_iter, tol).
+
+    On concrete values it raises here. On traced values (inside jit, vmap or grad) the same check
+    is compiled into the program and raises when the program runs, as a JAX runtime error that
+    carries the message.
+    """
+    if not throw:
+        return
+    if is_concrete(result) and all(is_concrete(v) for v in context.values() if not isinstance(v, str)):
+        _raise_first(np.asarray(result), what, context)
+        return
+    static = {k: v for k, v in context.items() if isinstance(v, str)}
+    arrays = {k: v for k, v in context.items() if not isinstance(v, str)}
+    jax.debug.callback(lambda r, a: _raise_first(np.asarray(r), what, dict(static, **a)), result, arrays)
+
+
+def _raise_first(result: np.ndarray, what: str, context: dict) -> None:
+    failed = np.flatnonzero(result.ravel() != SUCCESS)
+    if failed.size == 0:
+        return
+    i = int(failed[0])
+    values = {}
+    for k, v in context.items():
+        a = np.asarray(v)
+        values[k] = v if isinstance(v, str) else (a.ravel()[i] if a.shape == result.shape and a.ndim else a.item())
+    code = int(result.ravel()[i])
+    where = ""
+    if result.ndim:
+        index = np.unravel_index(i, result.shape)
+        where = f" at point {index if len(index) > 1 else index[0]} ({failed.size} of {result.size} failed)"
+    raise ConvergenceError(f"{what} did not converge{where}: {message(code, what=what, **values)}", code)
