@@ -36,6 +36,7 @@ from .results import OptimumResult as OptimumResult  # noqa: E402
 from .results import SweepChunk as SweepChunk  # noqa: E402
 from .results import SweepResult as SweepResult  # noqa: E402
 from .results import gather as gather  # noqa: E402
+from .robot import CalibrationWarning as CalibrationWarning  # noqa: E402
 from .robot import Robot as Robot  # noqa: E402
 from .solve import Solution as Solution  # noqa: E402
 from .solve import solve as solve  # noqa: E402

@@ -6,17 +6,22 @@ import argparse
 import contextlib
 import dataclasses
 import json
+import math
 import os
+import re
 import sys
+import tempfile
+import warnings
 from pathlib import Path
 
 import jax
 import numpy as np
 
+from .checks import interval
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .mechanics import compliance, compliance_ellipsoid
 from .options import MAX_ITER, STEPS, SolverOptions
-from .robot import SCALAR_FIELDS, Robot
+from .robot import SCALAR_FIELDS, CalibrationWarning, Robot
 from .solve import check_solution, solve
 from .status import ConvergenceError
 
@@ -57,6 +62,21 @@ def use_every_cpu_core() -> bool:
     return True
 
 
+NUMBER_LIST = re.compile(r"^-(\d|\.\d)[\d.eE+\-]*(,\s*-?(\d|\.\d)[\d.eE+\-]*)*$")
+"""A token that starts with '-' but is a (list of) number(s), never a flag."""
+
+
+def _negative_values_attached(argv: list[str]) -> list[str]:
+    """``--tensions -5,0,0,0`` as ``--tensions=-5,0,0,0``: argparse would read the value as a flag."""
+    out: list[str] = []
+    for token in argv:
+        if out and NUMBER_LIST.match(token) and out[-1].startswith("--") and "=" not in out[-1]:
+            out[-1] = f"{out[-1]}={token}"
+        else:
+            out.append(token)
+    return out
+
+
 def _floats(n: int | None = None):
     def parse(text: str):
         try:
@@ -65,9 +85,21 @@ def _floats(n: int | None = None):
             raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
         if n is not None and len(values) != n:
             raise argparse.ArgumentTypeError(f"expected {n} comma-separated numbers, got {len(values)} in {text!r}")
+        if not all(math.isfinite(v) for v in values):
+            raise argparse.ArgumentTypeError(f"expected finite numbers, got {text!r}")
         return values
 
     return parse
+
+
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
 
 
 def _assignment(text: str):
@@ -78,6 +110,48 @@ def _assignment(text: str):
         return name.strip(), float(value)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{name.strip()}: expected a number, got {value!r}") from None
+
+
+def check_flag(flag: str, value, lo=0.0, hi=math.inf, unit="", *, lo_open=False) -> None:
+    """A ValueError in the user's own terms (``--insertion-mm 200 is outside [0, 160] mm``) unless
+    every number of a flag's value lies in [lo, hi]."""
+    values = np.atleast_1d(np.asarray(value, dtype=float))
+    bad = (values <= lo if lo_open else values < lo) | (values > hi)
+    if np.any(bad):
+        typed = ",".join(f"{v:g}" for v in values)
+        which = f" (value {int(np.argmax(bad)) + 1}: {values[np.argmax(bad)]:g})" if values.size > 1 else ""
+        raise ValueError(f"{flag} {typed}{which} is outside the allowed range {interval(lo, hi, lo_open)}{unit}")
+
+
+def check_count(flag: str, value, n: int, what: str) -> None:
+    if len(value) != n:
+        raise ValueError(f"{flag} {','.join(f'{v:g}' for v in value)} has {len(value)} values: {what}")
+
+
+def check_output(flag: str, path, folder: bool = False) -> None:
+    """Before any computation: an output file's folder (or an output folder's nearest existing
+    ancestor, which it will be made in) exists and takes a new file; a ValueError names the flag
+    and the path otherwise."""
+    path = Path(path)
+    if not folder and path.is_dir():
+        raise ValueError(f"{flag} {path}: is a folder, expected a file name")
+    if folder and path.exists() and not path.is_dir():
+        raise ValueError(f"{flag} {path}: is a file, expected a folder")
+    where = path if folder and path.is_dir() else path.parent
+    if not folder and not where.is_dir():
+        raise ValueError(f"{flag} {path}: the folder {where} does not exist")
+    while folder and not where.exists():
+        where = where.parent
+    try:
+        with tempfile.TemporaryFile(dir=where):
+            pass
+        if not folder and path.exists():
+            path.open("a").close()
+    except OSError as e:
+        raise ValueError(f"{flag} {path}: cannot write a file in {where} ({e.strerror or e})") from None
+
+
+LISTS_HELP = "Lists are comma-separated; negative values may be typed as they are (--tip-force -0.15,0,0)."
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -105,41 +179,55 @@ def _parser() -> argparse.ArgumentParser:
 
     common = argparse.ArgumentParser(add_help=False, parents=[described])
     common.add_argument(
-        "--tensions", type=_floats(), default=(0.0, 0.0, 0.0, 0.0), help="tendon tensions in N, tendon 1 first (default 0,0,0,0)"
+        "--tensions", type=_floats(), metavar="T1,T2,...", help="tendon tensions in N, tendon 1 first (default all 0)"
     )
-    common.add_argument("--insertion-mm", type=float, default=0.0, help="Nitinol tube insertion depth in mm (default 0)")
+    common.add_argument("--insertion-mm", type=_finite, default=0.0, help="Nitinol tube insertion depth in mm (default 0)")
     tip = common.add_mutually_exclusive_group()
-    tip.add_argument("--tip-mass-g", type=float, help="tip mass in grams, hanging under standard gravity (-y)")
+    tip.add_argument("--tip-mass-g", type=_finite, help="tip mass in grams, hanging under standard gravity (-y)")
     tip.add_argument("--tip-force", type=_floats(3), metavar="FX,FY,FZ", help="tip force in N, world frame")
     common.add_argument(
         "--tip-moment", type=_floats(3), default=(0.0, 0.0, 0.0), metavar="MX,MY,MZ", help="tip moment in N m, world frame"
     )
     common.add_argument("--json", action="store_true", help="print one JSON object instead of text")
 
-    parser = argparse.ArgumentParser(prog="tdct", description="Statics of the TDCT soft robot (tdct_jax).")
+    parser = argparse.ArgumentParser(
+        prog="tdct",
+        description="Statics of the TDCT soft robot (tdct_jax). " + LISTS_HELP,
+        epilog="Exit codes: 0 done, 1 not converged (the reason on stderr), 2 bad input, 3 internal error.",
+    )
     verbs = parser.add_subparsers(dest="verb", required=True)
-    p = verbs.add_parser("solve", parents=[common], help="solve one static shape and print the tip pose")
+    p = verbs.add_parser("solve", parents=[common], help="solve one static shape and print the tip pose", epilog=LISTS_HELP)
     p.add_argument("--plot", metavar="shape.png", help="save a side view and a 3D view of the shape")
     p.add_argument("--csv", metavar="shape.csv", help="save the shape as s_mm,x_mm,y_mm,z_mm")
-    c = verbs.add_parser("compliance", parents=[common], help="exact tip compliance matrix (eq. 41) and its ellipsoid")
+    c = verbs.add_parser(
+        "compliance", parents=[common], help="exact tip compliance matrix (eq. 41) and its ellipsoid", epilog=LISTS_HELP
+    )
     c.add_argument("--plot", metavar="ellipse.png", help="save the ellipsoid projected on its two largest axes")
     r = verbs.add_parser("reproduce", parents=[cached], help="regenerate the paper's simulation figures and headline numbers")
     r.add_argument("--out", default="tdct-reproduce", metavar="DIR", help="output folder (default tdct-reproduce)")
     r.add_argument("--quick", action="store_true", help="coarse grids and no parameter fit (about a minute)")
     r.add_argument("--robot", metavar="robot.toml", help="TOML file of Robot fields in SI units")
     r.add_argument("--quiet", action="store_true", help="no progress output")
-    y = verbs.add_parser("synth", parents=[described], help="write synthetic FBG-like shape files from the model")
+    y = verbs.add_parser(
+        "synth", parents=[described], help="write synthetic FBG-like shape files from the model", epilog=LISTS_HELP
+    )
     y.add_argument("--out", required=True, metavar="DIR", help="folder for the shape files (one CSV per experiment)")
     which = y.add_mutually_exclusive_group(required=True)
     which.add_argument(
         "--preset", choices=["paper"], help="paper: Sec. III.B's protocol, tendon 1 at 2, 4, 6, 8, 10 N, no tube, no load"
     )
     which.add_argument(
-        "--tensions", type=_floats(), action="append", help="tendon tensions in N, tendon 1 first; repeat for more experiments"
+        "--tensions",
+        type=_floats(),
+        action="append",
+        metavar="T1,T2,...",
+        help="tendon tensions in N, tendon 1 first; repeat for more experiments",
     )
-    y.add_argument("--insertion-mm", type=float, default=0.0, help="tube insertion depth in mm for every experiment (default 0)")
-    y.add_argument("--tip-mass-g", type=float, default=0.0, help="tip mass in grams for every experiment (default 0)")
-    y.add_argument("--noise-mm", type=float, default=0.1, help="Gaussian noise per coordinate in mm (default 0.1)")
+    y.add_argument(
+        "--insertion-mm", type=_finite, default=0.0, help="tube insertion depth in mm for every experiment (default 0)"
+    )
+    y.add_argument("--tip-mass-g", type=_finite, default=0.0, help="tip mass in grams for every experiment (default 0)")
+    y.add_argument("--noise-mm", type=_finite, default=0.1, help="Gaussian noise per coordinate in mm (default 0.1)")
     y.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     y.add_argument("--points", type=int, default=33, help="points per shape, base to tip (default 33)")
     k = verbs.add_parser("calibrate", parents=[described], help="fit Robot fields to measured shape files (Sec. III.B)")
@@ -152,13 +240,21 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+OUTPUTS = {"plot": "--plot", "csv": "--csv"}
+"""File outputs by destination and flag, checked before any computation; folders (--out) are
+checked by their verbs."""
+
+
 def _robot(args) -> Robot:
     robot = Robot.from_toml(args.robot) if args.robot else Robot()
     fields = dict(getattr(args, "set", []))
     unknown = sorted(set(fields) - set(SCALAR_FIELDS))
     if unknown:
         raise ValueError(f"--set: unknown Robot field(s) {unknown}; allowed: {list(SCALAR_FIELDS)}")
-    return dataclasses.replace(robot, **fields)
+    try:
+        return dataclasses.replace(robot, **fields)
+    except ValueError as e:
+        raise ValueError(f"--set: {e}") from None
 
 
 def _gravity(args):
@@ -166,19 +262,40 @@ def _gravity(args):
 
 
 def _solver(args) -> SolverOptions:
+    check_flag("--steps", args.steps, 1)
+    check_flag("--max-iter", args.max_iter, 1)
     return SolverOptions(steps=args.steps, max_iter=args.max_iter)
 
 
+def _check_tensions(flag: str, tensions, robot: Robot) -> None:
+    check_count(flag, tensions, robot.n_tendons, f"the robot has {robot.n_tendons} tendons, one tension each")
+    check_flag(flag, tensions, 0.0, unit=" N")
+
+
 def _inputs(args):
-    """Robot, actuation, load and solve options from the shared flags, in SI units."""
+    """Robot, actuation, load and solve options from the shared flags, checked in the units typed."""
     robot = _robot(args)
-    act = Actuation(tensions=args.tensions, insertion=args.insertion_mm * 1e-3)
+    solver = _solver(args)
+    tensions = args.tensions if args.tensions is not None else (0.0,) * robot.n_tendons
+    _check_tensions("--tensions", tensions, robot)
+    check_flag("--insertion-mm", args.insertion_mm, 0.0, 1e3 * float(robot.length), " mm")
+    act = Actuation(tensions=tensions, insertion=args.insertion_mm * 1e-3)
     if args.tip_mass_g is not None:
+        check_flag("--tip-mass-g", args.tip_mass_g, 0.0, unit=" g")
         load = TipLoad(force=TipLoad.from_mass(args.tip_mass_g * 1e-3).force, moment=args.tip_moment)
     else:
         load = TipLoad(force=args.tip_force or (0.0, 0.0, 0.0), moment=args.tip_moment)
-    options = dict(gravity=_gravity(args), solver=_solver(args))
-    return robot, act, load, options
+    return robot, act, load, dict(gravity=_gravity(args), solver=solver)
+
+
+def _conditions(args, act: Actuation) -> str:
+    """The inputs as typed, for figure titles."""
+    text = f"tensions {', '.join(f'{t:g}' for t in np.asarray(act.tensions))} N, insertion {args.insertion_mm:g} mm"
+    if args.tip_mass_g is not None:
+        return f"{text}, tip mass {args.tip_mass_g:g} g"
+    if args.tip_force is not None:
+        return f"{text}, tip force ({', '.join(f'{f:g}' for f in args.tip_force)}) N"
+    return text
 
 
 def _compliance_command(args) -> int:
@@ -203,7 +320,7 @@ def _compliance_command(args) -> int:
     if args.plot:
         from .plotting import plot_compliance_ellipses
 
-        plot_compliance_ellipses({f"insertion {args.insertion_mm:g} mm": CM}, args.plot)
+        plot_compliance_ellipses({f"insertion {args.insertion_mm:g} mm": CM}, args.plot, title=_conditions(args, act))
     return 0
 
 
@@ -234,8 +351,7 @@ def _solve_command(args) -> int:
     if args.plot:
         from .plotting import plot_shape
 
-        title = f"tensions {', '.join(f'{t:g}' for t in args.tensions)} N, insertion {args.insertion_mm:g} mm"
-        plot_shape(sol, act.insertion, args.plot, title=title)
+        plot_shape(sol, act.insertion, args.plot, title=_conditions(args, act))
     check_solution(sol, options["solver"], True)
     return 0
 
@@ -243,6 +359,7 @@ def _solve_command(args) -> int:
 def _reproduce_command(args) -> int:
     from .reproduce import reproduce
 
+    check_output("--out", args.out, folder=True)
     robot = _robot(args)
     summary = reproduce(args.out, quick=args.quick, robot=robot, progress=not args.quiet)
     print((Path(args.out) / "summary.md").read_text())
@@ -258,10 +375,18 @@ def _synth_command(args) -> int:
     from .calibrate import synthesize
     from .data import write_experiment
 
+    check_output("--out", args.out, folder=True)
     robot = _robot(args)
+    solver = _solver(args)
+    check_flag("--insertion-mm", args.insertion_mm, 0.0, 1e3 * float(robot.length), " mm")
+    check_flag("--tip-mass-g", args.tip_mass_g, 0.0, unit=" g")
+    check_flag("--noise-mm", args.noise_mm, 0.0, unit=" mm")
+    check_flag("--points", args.points, 2)
     if args.preset == "paper":
         acts = paper.calibration_conditions(robot)
     else:
+        for t in args.tensions:
+            _check_tensions("--tensions", t, robot)
         acts = [Actuation(t, args.insertion_mm * 1e-3) for t in args.tensions]
     experiments = synthesize(
         robot,
@@ -271,7 +396,7 @@ def _synth_command(args) -> int:
         noise=args.noise_mm * 1e-3,
         seed=args.seed,
         gravity=_gravity(args),
-        solver=_solver(args),
+        solver=solver,
     )
     for i, e in enumerate(experiments, start=1):
         print(write_experiment(Path(args.out) / f"{i:02d}_{e.name}.csv", e))
@@ -283,9 +408,11 @@ def _calibrate_command(args) -> int:
     from .data import read_experiments
 
     robot = _robot(args)
+    solver = _solver(args)
+    check_flag("--max-steps", args.max_steps, 1)
     experiments = read_experiments(args.files, robot)
     params = tuple(p.strip() for p in args.params.split(",") if p.strip())
-    options = dict(gravity=_gravity(args), solver=_solver(args))
+    options = dict(gravity=_gravity(args), solver=solver)
     fit = calibrate(robot, experiments, params, max_steps=args.max_steps, progress=not args.quiet, throw=False, **options)
     print(json.dumps(fit.to_dict()) if args.json else fit.summary())
     if args.plot:
@@ -299,30 +426,69 @@ def _calibrate_command(args) -> int:
     return 0
 
 
+COMMANDS = {
+    "solve": _solve_command,
+    "compliance": _compliance_command,
+    "reproduce": _reproduce_command,
+    "synth": _synth_command,
+    "calibrate": _calibrate_command,
+}
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit code (0 ok, 1 not converged, 2 bad input)."""
-    args = _parser().parse_args(argv)
-    command = {
-        "solve": _solve_command,
-        "compliance": _compliance_command,
-        "reproduce": _reproduce_command,
-        "synth": _synth_command,
-        "calibrate": _calibrate_command,
-    }[args.verb]
+    """Entry point; returns the exit code: 0 done, 1 not converged, 2 bad input (the reason on
+    stderr, before any computation where it can be known then), 3 an internal error (a bug:
+    TDCT_DEBUG=1 shows its traceback)."""
+    try:
+        args = _parser().parse_args(_negative_values_attached(sys.argv[1:] if argv is None else list(argv)))
+    except SystemExit as e:  # argparse: --help (0) or a usage error (2), already printed
+        return int(e.code or 0)
     use_every_cpu_core()
     cache = None if args.no_compile_cache else compile_cache_dir()
     if cache is not None:
         enable_compile_cache(cache)
     on_cpu = args.verb in ON_CPU and jax.default_backend() != "cpu"
     try:
-        with jax.default_device(jax.local_devices(backend="cpu")[0]) if on_cpu else contextlib.nullcontext():
-            return command(args)
-    except ValueError as e:
-        print(f"tdct: error: {e}", file=sys.stderr)
-        return 2
+        for dest, flag in OUTPUTS.items():
+            if getattr(args, dest, None):
+                check_output(flag, getattr(args, dest))
+        with _notes(), jax.default_device(jax.local_devices(backend="cpu")[0]) if on_cpu else contextlib.nullcontext():
+            return COMMANDS[args.verb](args)
+    except (ValueError, TypeError, OSError) as e:
+        return _fail(e, 2)
     except ConvergenceError as e:
-        print(f"tdct: error: {e}", file=sys.stderr)
-        return 1
+        return _fail(e, 1)
+    except KeyboardInterrupt:
+        print("tdct: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # no traceback reaches a user: say what happened and how to learn more
+        if os.environ.get("TDCT_DEBUG"):
+            raise
+        return _fail(f"internal error ({type(e).__name__}: {e}); please report it (TDCT_DEBUG=1 shows the traceback)", 3)
+
+
+def _fail(error, code: int) -> int:
+    if isinstance(error, OSError) and error.filename:
+        error = f"{error.filename}: {error.strerror or error}"
+    print(f"tdct: error: {error}", file=sys.stderr)
+    return code
+
+
+@contextlib.contextmanager
+def _notes():
+    """Prints CalibrationWarnings as one-line notes on stderr (inputs outside the calibrated range)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", CalibrationWarning)
+        show = warnings.showwarning
+
+        def note(message, category, *rest, **kw):
+            if issubclass(category, CalibrationWarning):
+                print(f"tdct: note: {message}", file=sys.stderr)
+            else:
+                show(message, category, *rest, **kw)
+
+        warnings.showwarning = note
+        yield
 
 
 if __name__ == "__main__":

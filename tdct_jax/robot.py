@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import dataclasses
+import sys
 import tomllib
+import warnings
 from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
 
-from .checks import as_array, check_range, is_concrete
-from .tree import pytree, set_fields
+from .checks import as_array, check_range, fmt, interval, is_concrete
+from .tree import pytree, set_fields, static
 
 SCALAR_FIELDS = (
     "length",
@@ -27,6 +29,12 @@ SCALAR_FIELDS = (
     "nu_tube",
     "density_tube",
 )
+UNITS = dict(E_silicone=" Pa", E_tube=" Pa", density_silicone=" kg/m^3", density_tube=" kg/m^3", nu_silicone="", nu_tube="")
+"""Units of the scalar fields in messages (lengths: m)."""
+
+
+class CalibrationWarning(UserWarning):
+    """Inputs outside the range a robot was calibrated over: a note, not an error."""
 
 
 @pytree
@@ -53,6 +61,10 @@ class Robot:
             density [kg/m^3].
         tube_outer_diameter, tube_inner_diameter: Nitinol tube annulus [m].
         E_tube, nu_tube, density_tube: tube modulus [Pa], Poisson ratio, density [kg/m^3].
+        calibrated_tension: (lowest, highest) tension [N] the model was calibrated over (static);
+            inputs beyond it get a CalibrationWarning, not an error. Default the paper's 0-10 N.
+        calibrated_tip_force: (lowest, highest) tip force magnitude [N] likewise (static);
+            default the paper's 0-0.5 N (50 g).
     """
 
     length: float = 0.160
@@ -69,9 +81,17 @@ class Robot:
     E_tube: float = 83e9
     nu_tube: float = 0.33
     density_tube: float = 6450.0
+    calibrated_tension: tuple = static(default=(0.0, 10.0))
+    calibrated_tip_force: tuple = static(default=(0.0, 0.5))
 
     def __post_init__(self):
-        set_fields(self, **{name: as_array(name, getattr(self, name), ()) for name in SCALAR_FIELDS})
+        set_fields(self, **{name: as_array(name, getattr(self, name), (), unit=_unit(name)) for name in SCALAR_FIELDS})
+        for name in ("calibrated_tension", "calibrated_tip_force"):
+            bounds = as_array(name, getattr(self, name), (2,), unit=" N")
+            check_range(name, bounds, 0.0, unit=" N")
+            if bounds[0] > bounds[1]:
+                raise ValueError(f"{name} = {fmt(bounds)} N must be (lowest, highest) with lowest <= highest")
+            set_fields(self, **{name: tuple(float(b) for b in bounds)})
         angles = self.tendon_angles
         if is_concrete(angles):
             n = np.asarray(angles).size
@@ -82,11 +102,10 @@ class Robot:
         self._check()
 
     def _check(self):
-        pos = dict(lo=0.0, lo_open=True)
         for name in ("length", "outer_diameter", "E_silicone", "E_tube", "tube_outer_diameter"):
-            check_range(name, getattr(self, name), **pos)
+            check_range(name, getattr(self, name), 0.0, lo_open=True, unit=_unit(name))
         for name in ("density_silicone", "density_tube", "tendon_channel_diameter", "tube_inner_diameter"):
-            check_range(name, getattr(self, name), 0.0)
+            check_range(name, getattr(self, name), 0.0, unit=_unit(name))
         for name in ("nu_silicone", "nu_tube"):
             check_range(name, getattr(self, name), -1.0, 0.5, lo_open=True)
         if not all(is_concrete(getattr(self, f.name)) for f in dataclasses.fields(self)):
@@ -101,12 +120,63 @@ class Robot:
             unit=" m (must fit the channel)",
         )
         check_range("tube_inner_diameter", self.tube_inner_diameter, 0.0, self.tube_outer_diameter, hi_open=True, unit=" m")
-        rim = (self.outer_diameter - self.tendon_channel_diameter) / 2
-        check_range("tendon_offset", self.tendon_offset, 0.0, float(rim), unit=" m (tendon channels inside the body)")
+        dt = float(self.tendon_channel_diameter)
+        rim = (float(self.outer_diameter) - dt) / 2
+        if dt > 0:  # a channel of its own: outside the central channel and inside the body
+            core = (float(self.channel_diameter) + dt) / 2
+            where = " m (tendon channels between the central channel and the surface)"
+            check_range("tendon_offset", self.tendon_offset, core, rim, unit=where)
+            self._check_tendon_spacing(dt)
+        else:
+            check_range("tendon_offset", self.tendon_offset, 0.0, rim, unit=" m (tendons inside the body)")
         if float(self.area_silicone) <= 0:
             raise ValueError(
                 f"the silicone cross-section area {float(self.area_silicone):g} m^2 is not positive: channels larger than the body"
             )
+
+    def _check_tendon_spacing(self, dt: float) -> None:
+        """Tendon channels of diameter dt at radius r_t do not overlap each other."""
+        a = np.asarray(self.tendon_angles)
+        if a.size < 2:
+            return
+        gap = np.abs((a[:, None] - a[None, :] + np.pi) % (2 * np.pi) - np.pi)
+        np.fill_diagonal(gap, np.inf)
+        i, j = np.unravel_index(np.argmin(gap), gap.shape)
+        distance = 2 * float(self.tendon_offset) * np.sin(gap[i, j] / 2)
+        if distance <= dt:
+            raise ValueError(
+                f"tendon_angles: tendons {min(i, j) + 1} and {max(i, j) + 1} are {np.degrees(gap[i, j]):.3g} deg apart, so their "
+                f"channels (diameter {dt:g} m) at tendon_offset {float(self.tendon_offset):g} m overlap: centres {distance:.3g} m "
+                f"apart, at least {dt:g} m needed"
+            )
+
+    def calibration_notes(self, tensions, tip_force) -> list[str]:
+        """Notes for concrete inputs outside the calibrated ranges (tensions [N], tip forces [N],
+        any leading axes); tracers give none."""
+        notes = []
+        magnitudes = None if not is_concrete(tip_force) else np.linalg.norm(np.asarray(tip_force, dtype=float), axis=-1)
+        for what, values, (lo, hi) in (
+            ("tensions", tensions, self.calibrated_tension),
+            ("tip force magnitudes", magnitudes, self.calibrated_tip_force),
+        ):
+            if values is None or not is_concrete(values) or np.size(values) == 0:
+                continue
+            v = np.asarray(values, dtype=float)
+            extreme = f"up to {v.max():.4g} N" if v.max() > hi else f"down to {v.min():.4g} N" if v.min() < lo else None
+            if extreme:
+                notes.append(
+                    f"{what} {extreme} are outside the range {interval(lo, hi)} N this robot was calibrated over: "
+                    "the model is not validated there (far above it, shapes may loop)"
+                )
+        return notes
+
+    def warn_outside_calibration(self, tensions, tip_force) -> None:
+        """``calibration_notes`` as CalibrationWarnings, attributed to the caller's code."""
+        level, frame = 2, sys._getframe(1)
+        while frame is not None and frame.f_globals.get("__name__", "").startswith("tdct_jax"):
+            frame, level = frame.f_back, level + 1
+        for note in self.calibration_notes(tensions, tip_force):
+            warnings.warn(note, CalibrationWarning, stacklevel=level)
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Robot:
@@ -190,3 +260,7 @@ class Robot:
         """Mass per unit length [kg/m] of the silicone, plus the tube where it is inserted."""
         rho = self.density_silicone * self.area_silicone
         return rho + self.tube_linear_density if with_tube else rho
+
+
+def _unit(name: str) -> str:
+    return UNITS.get(name, " m")

@@ -199,6 +199,7 @@ def solve_arguments(robot, act, load, gravity, guess, solver) -> tuple:
     """Checks a single solve's arguments; returns those of ``solution_and_compliance``."""
     load = TipLoad() if load is None else load
     check_inputs(robot, act, load, solver)
+    robot.warn_outside_calibration(act.tensions, load.force)
     guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
     gravity, guess = _on_cpu(gravity_vector(gravity), guess)
     return robot, act, load, gravity, guess, solver

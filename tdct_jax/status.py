@@ -19,6 +19,9 @@ NONFINITE = 3
 OUTER_LIMIT = 4
 """An outer iteration (load capacity, insertion optimum, inverse kinematics, calibration) used its
 ``max_steps`` without meeting its own tolerance."""
+UNREACHABLE = 5
+"""Inverse kinematics: no input within the bounds puts the tip on the target; the nearest pose
+found is the answer (not a failure: ``throw`` does not raise for it)."""
 
 NAMES = {
     SUCCESS: "converged",
@@ -26,6 +29,7 @@ NAMES = {
     CONTINUATION_EXHAUSTED: "load continuation exhausted",
     NONFINITE: "non-finite residual",
     OUTER_LIMIT: "outer iteration limit reached",
+    UNREACHABLE: "target unreachable",
 }
 
 _ADVICE = {
@@ -47,6 +51,7 @@ _ADVICE = {
     OUTER_LIMIT: (
         "{what} used its max_steps = {max_steps} without meeting its tolerance; raise max_steps or start nearer the answer."
     ),
+    UNREACHABLE: "no inputs within the bounds put the tip on the target; the nearest pose found is returned.",
 }
 
 

@@ -85,8 +85,13 @@ def prepare(robot, act, load, grid, batch, *, gravity, solver, single=False) -> 
     check_inputs(robot, act, load, solver)
     base = (robot, act, load, gravity_vector(gravity), solver)
     if single and grid is None and batch is None:
-        return Points(base, {"insertion": np.asarray(act.insertion).reshape(1)}, (), None)
-    return Points(base, *_columns(robot, grid, batch))
+        points = Points(base, {"insertion": np.asarray(act.insertion).reshape(1)}, (), None)
+    else:
+        points = Points(base, *_columns(robot, grid, batch))
+    p, g = points.points, base[3]
+    force = np.asarray(p.get("force", load.force)) + np.multiply.outer(p.get("tip_mass", 0.0), np.asarray(g))
+    robot.warn_outside_calibration(p.get("tensions", act.tensions), force)
+    return points
 
 
 def unflatten(arrays: dict, shape: tuple, lead: int = 1) -> dict:

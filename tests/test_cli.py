@@ -1,5 +1,6 @@
 """The tdct command line: output matches the API, bad input exits 2, files are written."""
 
+import importlib
 import json
 import os
 import subprocess
@@ -8,6 +9,7 @@ import textwrap
 
 import jax
 import numpy as np
+import pytest
 
 import tdct_jax as tdct
 from tdct_jax.cli import main
@@ -41,7 +43,7 @@ def test_bad_input_exits_2_with_the_reason(capsys, tmp_path):
     assert main(["solve", "--tensions=-1,0,0,0"]) == 2
     assert "tensions" in capsys.readouterr().err
     assert main(["solve", "--insertion-mm", "200"]) == 2
-    assert "insertion = 0.2 is outside the allowed range [0, 0.16]" in capsys.readouterr().err
+    assert "--insertion-mm 200 is outside the allowed range [0, 160] mm" in capsys.readouterr().err
     bad = tmp_path / "robot.toml"
     bad.write_text("E_silicone = -3.0\n")
     assert main(["solve", "--robot", str(bad)]) == 2
@@ -108,3 +110,75 @@ def test_cli_compile_cache_is_on_by_default_and_off_in_tests_and_sweeps_get_ever
     cache = tmp_path / "tdct_jax" / "xla"
     assert run.stdout.split() == [str(cache), str(os.cpu_count())]  # one CPU device per core
     assert any(cache.iterdir())
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["solve", "--tensions", "-5,0,0,0"], "--tensions -5,0,0,0 (value 1: -5) is outside the allowed range [0, inf] N"),
+        (["solve", "--tip-force", "-0.15,0,0", "--tensions", "1,0,0"], "--tensions 1,0,0 has 3 values: the robot has 4 tendons"),
+        (["solve", "--insertion-mm", "200"], "--insertion-mm 200 is outside the allowed range [0, 160] mm"),
+        (["solve", "--insertion-mm", "-1e-3"], "--insertion-mm -0.001 is outside the allowed range [0, 160] mm"),
+        (["solve", "--tip-mass-g", "-3"], "--tip-mass-g -3 is outside the allowed range [0, inf] g"),
+        (["compliance", "--max-iter", "0"], "--max-iter 0 is outside the allowed range [1, inf]"),
+        (["solve", "--set", "E_silicone=-3"], "--set: E_silicone = -3 is outside the allowed range (0, inf] Pa"),
+        (["synth", "--out", "x", "--tensions", "2,-1,0,0"], "--tensions 2,-1,0,0 (value 2: -1) is outside"),
+        (
+            ["synth", "--out", "x", "--preset", "paper", "--noise-mm", "-0.1"],
+            "--noise-mm -0.1 is outside the allowed range [0, inf] mm",
+        ),
+        (["calibrate", "nofile.csv", "--max-steps", "0"], "--max-steps 0 is outside the allowed range [1, inf]"),
+        (["solve", "--tensions", "nan,0,0,0"], "argument --tensions: expected finite numbers"),
+    ],
+)
+def test_bad_flags_exit_2_in_the_units_typed_without_a_traceback(argv, words, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert words in err and "Traceback" not in err
+
+
+def test_negative_values_are_read_as_typed(capsys, robot):
+    args = ["solve", "--tensions", "6,0,0,0", "--tip-force", "-0.15,0,-0.05", "--tip-moment", "-1e-3,0,0", "--json"]
+    assert main(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    load = tdct.TipLoad(force=(-0.15, 0.0, -0.05), moment=(-1e-3, 0.0, 0.0))
+    ref = tdct.solve(robot, tdct.Actuation((6.0, 0, 0, 0)), load)
+    np.testing.assert_allclose(out["tip_position_mm"], np.asarray(ref.tip_position) * 1e3, rtol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "argv, where",
+    [
+        (["solve", "--plot", "nodir/shape.png"], "--plot nodir/shape.png: the folder nodir does not exist"),
+        (["solve", "--csv", "/proc/x.csv"], "--csv /proc/x.csv: cannot write a file in /proc"),
+        (["compliance", "--plot", "."], "--plot .: is a folder"),
+        (["synth", "--preset", "paper", "--out", "/proc/x"], "--out /proc/x: cannot write a file in /proc"),
+        (["reproduce", "--quick", "--out", "/proc/x"], "--out /proc/x: cannot write a file in /proc"),
+        (["calibrate", "shapes", "--plot", "nodir/fit.png"], "--plot nodir/fit.png: the folder nodir does not exist"),
+    ],
+)
+def test_unwritable_outputs_exit_2_before_any_computation(argv, where, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    computed = []
+    for name in ("solve", "compliance", "calibrate", "synthesize", "reproduce"):
+        for module in ("tdct_jax.cli", "tdct_jax.calibrate", "tdct_jax.reproduce"):
+            if hasattr(importlib.import_module(module), name):
+                monkeypatch.setattr(importlib.import_module(module), name, lambda *a, name=name, **k: computed.append(name))
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert where in err and "Traceback" not in err
+    assert computed == []  # nothing was solved, fitted or synthesized
+
+
+def test_max_iter_reaches_the_solve_and_its_message(capsys):
+    assert main(["solve", "--tensions", "6,0,0,0", "--insertion-mm", "80", "--max-iter", "1"]) == 1
+    err = capsys.readouterr().err
+    assert "Newton used its limit of max_iter = 1 steps per load stage" in err and "--max-iter" in err
+    assert "Traceback" not in err
+
+
+def test_inputs_beyond_the_calibrated_range_get_a_note(capsys):
+    assert main(["solve", "--tensions", "20,0,0,0", "--no-gravity"]) == 0
+    err = capsys.readouterr().err
+    assert "tdct: note: tensions up to 20 N are outside the range [0, 10] N this robot was calibrated over" in err

@@ -1,5 +1,7 @@
 """Bad input gets a ValueError naming field, value and range; non-convergence is never silent."""
 
+import warnings
+
 import jax
 import numpy as np
 import pytest
@@ -135,3 +137,52 @@ def test_result_codes_per_lane_under_jit_and_vmap(robot):
     # throw=True inside the compiled program: the check runs there, lane by lane, with the message.
     with pytest.raises(Exception, match=r"ConvergenceError: the shooting solve did not converge: non-finite residual"):
         jax.jit(jax.vmap(lambda tau: tdct.solve(robot, tdct.Actuation(tau, 0.0)).tip_position))(tensions).block_until_ready()
+
+
+@pytest.mark.parametrize(
+    "make, words",
+    [
+        (lambda: tdct.SolverOptions(tol=np.inf), ["tol must be finite"]),
+        (lambda: tdct.SolverOptions(tol=np.nan), ["tol must be finite"]),
+        (lambda: tdct.SolverOptions(tol=0.0), ["tol = 0", "(0, inf]"]),
+        (lambda: tdct.SolverOptions(max_iter=2.5), ["max_iter = 2.5", "integer >= 1"]),
+        (lambda: tdct.SolverOptions(tendon_model="tilted"), ["tendon_model", "'exact', 'paper'"]),
+        (lambda: tdct.Robot(tendon_angles=(0.0, 0.1, np.pi)), ["tendons 1 and 2", "overlap", "0.001 m"]),
+        (lambda: tdct.Robot(tendon_offset=1.1e-3), ["tendon_offset = 0.0011", "[0.00125, 0.0095] m", "central channel"]),
+        (lambda: tdct.Robot(calibrated_tension=(10.0, 0.0)), ["calibrated_tension", "lowest <= highest"]),
+        (lambda: tdct.Robot(calibrated_tip_force=(0.0, -1.0)), ["calibrated_tip_force", "-1"]),
+    ],
+)
+def test_bad_solver_options_and_robot_geometry(make, words):
+    with pytest.raises(ValueError) as e:
+        make()
+    for w in words:
+        assert w in str(e.value), str(e.value)
+
+
+def test_finite_difference_step_must_be_positive(robot):
+    for step in (0.0, -1e-3, np.nan):
+        with pytest.raises(ValueError, match="step"):
+            tdct.finite_difference_compliance(robot, tdct.Actuation(), step=step)
+
+
+def test_robot_file_errors_name_file_field_value_unit_and_range(tmp_path):
+    bad = tmp_path / "soft.toml"
+    bad.write_text("[robot]\nE_silicone = -3.0\n")
+    with pytest.raises(ValueError, match=r"robot file .*soft.toml: E_silicone = -3 is outside the allowed range \(0, inf\] Pa"):
+        tdct.Robot.from_toml(bad)
+    bad.write_text("[robot]\ndensity_silicone = -1130\n")
+    with pytest.raises(ValueError, match=r"soft.toml: density_silicone = -1130 .* \[0, inf\] kg/m\^3"):
+        tdct.Robot.from_toml(bad)
+
+
+def test_inputs_beyond_the_calibrated_range_warn_but_solve(robot, tmp_path):
+    with pytest.warns(tdct.CalibrationWarning, match=r"tensions up to 20 N are outside the range \[0, 10\] N"):
+        tdct.solve(robot, tdct.Actuation((20.0, 0, 0, 0)), gravity=None)
+    wide = tmp_path / "wide.toml"
+    wide.write_text("[robot]\ncalibrated_tension = [0.0, 25.0]\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", tdct.CalibrationWarning)  # the file declares 0-25 N: no note
+        tdct.solve(tdct.Robot.from_toml(wide), tdct.Actuation((20.0, 0, 0, 0)), gravity=None)
+    with pytest.warns(tdct.CalibrationWarning, match="tip force magnitudes up to 0.8 N"):
+        tdct.sweep(robot, batch={"force": [[0.0, -0.8, 0.0]]}, progress=False)

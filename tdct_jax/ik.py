@@ -1,0 +1,896 @@
+"""Inverse kinematics: the tensions and insertion that put the tip at a target pose, with the tube
+insertion as a redundant, stiffness-aware input (paper Secs. V.A and V.B).
+
+The free inputs (any subset of the tendons, and the insertion) are scaled to v = (tau / tau_max,
+d / L) and kept inside their bounds exactly. Two phases:
+
+1. Reach: bounded Levenberg-Marquardt on the task residual e (tip position error / L, weighted,
+   and optionally the orientation error). Each step solves a small box-constrained least-squares
+   problem exactly by enumerating the active sets (3^n of them for n <= 5 free inputs), so
+   active bounds are handled exactly, not by clipping. Two ways to evaluate a step: "augmented"
+   (the default) iterates the shooting unknowns x and the inputs v together, Newton on the tip
+   boundary residual r(x, v) = 0 and Gauss-Newton on e, one forward-mode Jacobian pass of
+   (r, e) per step; "nested" runs a converged forward solve at every step and differentiates
+   it implicitly.
+2. Optimise (with an objective, once reached): sequential quadratic programming on
+   min phi(v) subject to e(v) = 0 and the bounds, with phi's exact gradient (forward-mode
+   autodiff through the implicitly differentiated solve and compliance), a damped BFGS
+   Hessian of the Lagrangian, and the same exact active-set subproblem.
+
+A target that the bounds do not let the tip reach ends phase 1 at a stationary point of |e|^2:
+status UNREACHABLE with the nearest pose found and its distance. Derivatives of the solution
+with respect to the target and the robot come from implicit differentiation of the optimality
+conditions at the solution (``jax.jacfwd`` through ``inverse_kinematics``).
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from . import status
+from .checks import as_array, check_choice, check_integer, check_range, is_concrete
+from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
+from .mechanics import compliance_and_solution
+from .options import DEFAULT_SOLVER, SolverOptions
+from .robot import Robot
+from .shooting import force_scale, scaled, shoot
+from .solve import Solution, check_inputs, solution_and_compliance, tip_angle
+from .tree import pytree, set_fields, static
+
+TOL = 1e-10
+"""Default tolerance on the scaled task residual: position error / L (and orientation error [rad])."""
+MAX_STEPS = 60
+"""Default limit on IK steps (both phases together)."""
+OBJECTIVES = ("stiffness", "tension", "insertion")
+METHODS = ("augmented", "nested")
+AXES = "xyz"
+
+
+@pytree
+class Target:
+    """A tip pose to reach, world frame.
+
+    Attributes:
+        position: tip position [m], (3,).
+        direction: unit tip tangent to reach, (3,) (normalised here), or None.
+        tip_angle: in-plane tip angle theta_tip [rad] (z-y plane, from +z toward +y), or None;
+            at most one of direction and tip_angle.
+        position_weight: weight of the position error (per robot length), > 0.
+        orientation_weight: weight of the orientation error (per radian), >= 0.
+        axes: the position components that count (static), e.g. "yz" for a target in the z-y
+            plane, "y" for a tip height; default all three.
+    """
+
+    position: object
+    direction: object = None
+    tip_angle: object = None
+    position_weight: float = 1.0
+    orientation_weight: float = 1.0
+    axes: str = static(default="xyz")
+
+    def __post_init__(self):
+        if (
+            not isinstance(self.axes, str)
+            or not self.axes
+            or any(a not in AXES for a in self.axes)
+            or len(set(self.axes)) != len(self.axes)
+        ):
+            raise ValueError(f"axes = {self.axes!r} must name position components once each, from 'xyz'")
+        position = as_array("position", self.position, (3,), unit=" m")
+        direction = self.direction
+        if direction is not None:
+            direction = as_array("direction", direction, (3,))
+            if is_concrete(direction):
+                norm = float(np.linalg.norm(direction))
+                if norm == 0.0:
+                    raise ValueError("direction = [0, 0, 0]: a tip direction must be a nonzero vector")
+                direction = direction / norm
+        tip = as_array("tip_angle", self.tip_angle, (), unit=" rad") if self.tip_angle is not None else None
+        if direction is not None and tip is not None:
+            raise ValueError("give at most one of direction (a unit tangent) and tip_angle (in-plane), not both")
+        weights = {}
+        for name, lo_open in (("position_weight", True), ("orientation_weight", False)):
+            weights[name] = as_array(name, getattr(self, name), ())
+            check_range(name, weights[name], 0.0, lo_open=lo_open)
+        set_fields(self, position=position, direction=direction, tip_angle=tip, **weights)
+
+    @property
+    def orientation(self) -> str | None:
+        return "direction" if self.direction is not None else "tip_angle" if self.tip_angle is not None else None
+
+    @property
+    def size(self) -> int:
+        """Rows of the task residual."""
+        return len(self.axes) + {None: 0, "direction": 2, "tip_angle": 1}[self.orientation]
+
+
+@pytree
+class Bounds:
+    """Physical bounds on the inputs: tendons only pull, the tube stays inside the robot.
+
+    Attributes:
+        tension: (lowest, highest) tension of every free tendon [N], 0 <= lowest <= highest.
+        insertion: (shallowest, deepest) insertion [m] in [0, L]; None: (0, L).
+    """
+
+    tension: tuple = (0.0, 10.0)
+    insertion: tuple | None = None
+
+    def __post_init__(self):
+        tension = as_array("bounds.tension", self.tension, (2,), unit=" N")
+        check_range("bounds.tension", tension, 0.0, unit=" N")
+        insertion = None if self.insertion is None else as_array("bounds.insertion", self.insertion, (2,), unit=" m")
+        check_range("bounds.insertion", insertion, 0.0, unit=" m") if insertion is not None else None
+        for name, b in (("bounds.tension", tension), ("bounds.insertion", insertion)):
+            if b is not None and is_concrete(b) and b[0] > b[1]:
+                raise ValueError(f"{name} = {b.tolist()} must be (lowest, highest) with lowest <= highest")
+        set_fields(self, tension=tension, insertion=insertion)
+
+
+DEFAULT_BOUNDS = Bounds()
+
+
+class Plan(NamedTuple):
+    """What is free (static): which tendons (0-based), whether the insertion, which objective."""
+
+    tendons: tuple
+    insertion: bool
+    objective: object  # None, a name in OBJECTIVES, or a callable (sol, act) -> scalar
+    method: str
+
+
+@pytree
+class IKResult:
+    """Outcome of ``inverse_kinematics``.
+
+    Attributes:
+        actuation: the tensions [N] and insertion [m] found (every bound holds).
+        solution: the forward Solution there (``solution.tip_position`` etc.).
+        position_error: distance from the tip to the target position (over ``target.axes``) [m].
+        orientation_error: angle between tip and target orientation [rad] (0 without one).
+        objective: the objective's value there (NaN without one).
+        iterations: IK steps taken.
+        result: a ``tdct_jax.status`` code: SUCCESS (reached), UNREACHABLE (the nearest pose
+            found is returned, ``position_error`` away), OUTER_LIMIT, or the forward solve's own.
+    """
+
+    actuation: Actuation
+    solution: Solution
+    position_error: jax.Array
+    orientation_error: jax.Array
+    objective: jax.Array
+    iterations: jax.Array
+    result: jax.Array
+
+    @property
+    def reached(self):
+        return self.result == status.SUCCESS
+
+    @property
+    def tip_position(self):
+        return self.solution.tip_position
+
+    @property
+    def tip_angle(self):
+        return self.solution.tip_angle
+
+
+# ----------------------------------------------------------------------------- subproblems
+
+
+def _patterns(n: int) -> np.ndarray:
+    """Every active set of n box-constrained variables: 0 free, 1 at its lower, 2 at its upper bound."""
+    return np.array(list(itertools.product((0, 1, 2), repeat=n)), dtype=np.int8).reshape(-1, n)
+
+
+def box_qp(H, g, lo, hi, J=None, c=None):
+    """argmin 1/2 s^T H s + g^T s over lo <= s <= hi (and J s = c when given), H positive
+    definite, exactly: every active set is solved (fixed variables at their bounds) and the best
+    feasible solution kept. Returns (s, multipliers of J s = c, whether a feasible one exists)."""
+    n = g.shape[0]
+    m = 0 if J is None else J.shape[0]
+    tol = 1e-12 * (1.0 + jnp.max(jnp.abs(hi - lo)))
+
+    def one(p):
+        fixed = p > 0
+        value = jnp.where(p == 1, lo, hi) * fixed
+        keep = ~fixed
+        A = jnp.where(keep[:, None] & keep[None, :], H, 0.0) + jnp.diag(fixed.astype(H.dtype))
+        rhs = jnp.where(fixed, value, -(g + H @ value))
+        if m:
+            Jf = J * keep[None, :]
+            K = jnp.block([[A, Jf.T], [Jf, -1e-14 * jnp.eye(m)]])
+            sol = jnp.linalg.solve(K, jnp.concatenate([rhs, c - J @ value]))
+            s, lam = sol[:n], sol[n:]
+            consistent = jnp.max(jnp.abs(J @ s - c)) <= 1e-9 * (1.0 + jnp.max(jnp.abs(c)))
+        else:
+            s, lam, consistent = jnp.linalg.solve(A, rhs), jnp.zeros(0), True
+        ok = jnp.all(jnp.isfinite(s)) & jnp.all(s >= lo - tol) & jnp.all(s <= hi + tol) & consistent
+        return s, lam, ok, 0.5 * s @ H @ s + g @ s
+
+    s, lam, ok, q = jax.vmap(one)(jnp.asarray(_patterns(n)))
+    k = jnp.argmin(jnp.where(ok, q, jnp.inf))
+    return jnp.clip(s[k], lo, hi), lam[k], jnp.any(ok)
+
+
+# ----------------------------------------------------------------------------- the problem
+
+
+class Problem(NamedTuple):
+    """Everything an IK step needs besides the free inputs v (a pytree; ``plan`` is static)."""
+
+    robot: Robot
+    target: Target
+    load: TipLoad
+    gravity: jax.Array
+    base: Actuation  # values of the fixed inputs
+    lo: jax.Array  # bounds of v
+    hi: jax.Array
+    tension_scale: jax.Array  # [N] per unit of v
+    solver: SolverOptions
+    preferred_insertion: jax.Array  # [m], for the "insertion" objective
+    direction: jax.Array  # unit world direction for the "stiffness" objective (NaN: largest eigenvalue)
+
+
+def actuation_of(v, prob: Problem, plan: Plan) -> Actuation:
+    """The Actuation with the free inputs set from the scaled v."""
+    k = len(plan.tendons)
+    tensions = jnp.asarray(prob.base.tensions)
+    if k:
+        tensions = tensions.at[jnp.asarray(plan.tendons)].set(v[:k] * prob.tension_scale)
+    insertion = v[k] * prob.robot.length if plan.insertion else jnp.asarray(prob.base.insertion)
+    return Actuation(tensions, insertion)
+
+
+def scaled_inputs(act: Actuation, prob: Problem, plan: Plan):
+    """The inverse of ``actuation_of``: v of an Actuation."""
+    v = [jnp.asarray(act.tensions)[jnp.asarray(plan.tendons)] / prob.tension_scale] if plan.tendons else []
+    if plan.insertion:
+        v.append(jnp.reshape(act.insertion / prob.robot.length, (1,)))
+    return jnp.concatenate(v) if v else jnp.zeros(0)
+
+
+def task_residual(p, R, target: Target, L):
+    """The weighted task residual e: position error / L on ``target.axes``, then the orientation
+    error (tip angle difference [rad], or the target direction's x, y components in the tip frame)."""
+    index = np.array([AXES.index(a) for a in target.axes])
+    rows = [target.position_weight * (p[index] - target.position[index]) / L]
+    if target.orientation == "tip_angle":
+        rows.append(jnp.reshape(target.orientation_weight * _wrap(tip_angle(R) - target.tip_angle), (1,)))
+    elif target.orientation == "direction":
+        rows.append(target.orientation_weight * (R.T @ target.direction)[:2])
+    return jnp.concatenate(rows)
+
+
+def pose_errors(p, R, target: Target):
+    """(position error [m] over ``target.axes``, orientation error [rad])."""
+    index = np.array([AXES.index(a) for a in target.axes])
+    position = jnp.linalg.norm(p[index] - target.position[index])
+    if target.orientation == "tip_angle":
+        return position, jnp.abs(_wrap(tip_angle(R) - target.tip_angle))
+    if target.orientation == "direction":
+        t = R[:, 2]
+        return position, jnp.arctan2(jnp.linalg.norm(jnp.cross(t, target.direction)), t @ target.direction)
+    return position, jnp.zeros(())
+
+
+def _wrap(angle):
+    return (angle + jnp.pi) % (2 * jnp.pi) - jnp.pi
+
+
+def objective_value(sol: Solution, C, act: Actuation, prob: Problem, plan: Plan):
+    """phi in its physical unit: compliance along the direction [m/N] (or the largest eigenvalue of
+    its symmetric part), total squared tension [N^2], squared distance from the preferred
+    insertion [m^2], or the user's callable of (Solution, Actuation)."""
+    if plan.objective == "stiffness":
+        CM = C[:3, :3]
+        d = prob.direction
+        along = d @ CM @ d
+        largest = jnp.linalg.eigvalsh((CM + CM.T) / 2)[-1]
+        return jnp.where(jnp.all(jnp.isfinite(d)), along, largest)
+    if plan.objective == "tension":
+        return jnp.sum(jnp.asarray(act.tensions) ** 2)
+    if plan.objective == "insertion":
+        return (act.insertion - prob.preferred_insertion) ** 2
+    return plan.objective(sol, act)
+
+
+class Evaluation(NamedTuple):
+    """A converged forward solve at v and what the IK needs of it."""
+
+    e: jax.Array  # task residual
+    G: jax.Array  # de/dv
+    phi: jax.Array  # objective (0 without one)
+    dphi: jax.Array  # d phi / dv
+    wrench: jax.Array  # base wrench, the next solve's start
+    code: jax.Array  # the forward solve's status code
+
+
+def evaluate(v, guess, prob: Problem, plan: Plan) -> Evaluation:
+    """Forward solve at v (from ``guess``) with the task residual, the objective and their exact
+    derivatives in v (forward mode through the implicitly differentiated solve)."""
+
+    def f(v):
+        act = actuation_of(v, prob, plan)
+        options = dict(gravity=prob.gravity, solver=prob.solver, guess=guess, throw=False)
+        if plan.objective == "stiffness":
+            C, sol = compliance_and_solution(prob.robot, act, prob.load, **options)
+        else:
+            sol, C = solution_and_compliance(prob.robot, act, prob.load, prob.gravity, guess, prob.solver)
+        e = task_residual(sol.tip_position, sol.tip_rotation, prob.target, prob.robot.length)
+        phi = jnp.zeros(()) if plan.objective is None else objective_value(sol, C, act, prob, plan)
+        return (e, phi), (e, phi, sol.base_wrench, sol.result)
+
+    (G, dphi), (e, phi, wrench, code) = jax.jacfwd(f, has_aux=True)(v)
+    return Evaluation(e, G, phi, dphi, wrench, code)
+
+
+# ----------------------------------------------------------------------------- phase 1: reach
+
+
+MU_START = 1e-3
+"""Initial Levenberg-Marquardt damping (relative to the diagonal of G^T G)."""
+MU_GIVE_UP = 1e10
+"""Damping at which a phase stops: no step it could take lowers its merit."""
+STEP_TOL = 1e-11
+"""Phase 2 has converged when its step of the scaled inputs is below this (max norm) on the target."""
+STATIONARY = 1e-7
+"""Phase 1 ends above the tolerance (UNREACHABLE) when the projected gradient of |e|^2 / 2 is
+below this, relative to |G| |e|: the nearest reachable pose, to about that relative precision."""
+
+
+def _lm_step(G, e, mu, lo, hi):
+    """The bounded Levenberg step on |e + G s|^2 + mu |G|^2 |s|^2: damping the same for every
+    scaled input, so that inputs the task does not need (co-contraction) are left alone."""
+    A = G.T @ G
+    return box_qp(A + mu * jnp.trace(A) * jnp.eye(A.shape[0]), G.T @ e, lo, hi)[0]
+
+
+def _damping(mu, nu, actual, predicted):
+    """Nielsen's update of the damping from the gain ratio actual / predicted decrease: (mu, nu,
+    accepted)."""
+    rho = actual / jnp.where(predicted > 0, predicted, jnp.inf)
+    accepted = (actual > 0) & jnp.isfinite(actual)
+    mu_ok = mu * jnp.maximum(1 / 3, 1 - (2 * rho - 1) ** 3)
+    return jnp.where(accepted, mu_ok, mu * nu), jnp.where(accepted, 2.0, 2 * nu), accepted
+
+
+def _reach_status(e, G, v, mu, it, prob: Problem, tol, max_steps):
+    """(status code, done) of phase 1 at a point: reached, stationary above tol (the projected
+    gradient of |e|^2 / 2 vanishes, or no step lowers it), or out of steps."""
+    g = G.T @ e
+    free = jnp.where(v <= prob.lo, g < 0, jnp.where(v >= prob.hi, g > 0, True))
+    projected = jnp.max(jnp.abs(jnp.where(free, g, 0.0)))
+    scale = jnp.linalg.norm(G) * jnp.linalg.norm(e) + 1e-300
+    reached = jnp.max(jnp.abs(e)) <= tol
+    stationary = (projected <= STATIONARY * scale) | (mu >= MU_GIVE_UP)
+    code = jnp.where(reached, status.SUCCESS, jnp.where(stationary, status.UNREACHABLE, status.OUTER_LIMIT))
+    return code.astype(jnp.int32), reached | stationary | (it >= max_steps)
+
+
+class Reach(NamedTuple):
+    v: jax.Array
+    wrench: jax.Array
+    e: jax.Array
+    steps: jax.Array
+    code: jax.Array  # SUCCESS (reached), UNREACHABLE (stationary above tol), or a failure code
+
+
+def reach_nested(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
+    """Phase 1 with a converged forward solve (implicitly differentiated) at every trial."""
+
+    def cond(c):
+        return ~c[-1]
+
+    def body(c):
+        v, ev, mu, nu, it, code, _ = c
+        s = _lm_step(ev.G, ev.e, mu, prob.lo - v, prob.hi - v)
+        trial = evaluate(v + s, ev.wrench, prob, plan)
+        linear = ev.e + ev.G @ s
+        actual = jnp.where(trial.code == status.SUCCESS, ev.e @ ev.e - trial.e @ trial.e, -jnp.inf)
+        mu, nu, better = _damping(mu, nu, actual, ev.e @ ev.e - linear @ linear)
+        v, ev = jax.tree.map(lambda a, b: jnp.where(better, a, b), (v + s, trial), (v, ev))
+        code, done = _reach_status(ev.e, ev.G, v, mu, it + 1, prob, tol, max_steps)
+        return v, ev, mu, nu, it + 1, code, done
+
+    ev0 = evaluate(v0, wrench0, prob, plan)
+    code0, done0 = _reach_status(ev0.e, ev0.G, v0, MU_START, 0, prob, tol, max_steps)
+    solved = ev0.code == status.SUCCESS
+    init = (v0, ev0, jnp.asarray(MU_START), jnp.asarray(2.0), 0, jnp.where(solved, code0, ev0.code), done0 | ~solved)
+    v, ev, _, _, it, code, _ = lax.while_loop(cond, body, init)
+    return Reach(v, ev.wrench, ev.e, it, code)
+
+
+def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
+    """Phase 1 on the shooting unknowns x and the inputs v together: each step is Newton on the
+    tip boundary residual r(x, v) = 0 with Gauss-Newton on e for v, from one forward-mode
+    Jacobian pass of (r, e) in (x, v); x is eliminated, so the bounded step is taken in v alone.
+    ``wrench0`` must be the converged base wrench at v0."""
+    robot, L = prob.robot, prob.robot.length
+    F_s = force_scale(robot, actuation_of(v0, prob, plan), prob.load, prob.gravity)
+
+    def residuals(z):
+        x, v = z[:6], z[6:]
+        r, tip = shoot(robot, actuation_of(v, prob, plan), prob.load, prob.gravity, prob.solver, x, F_s)
+        F = jnp.concatenate([r, task_residual(tip.p, tip.R, prob.target, L)])
+        return F, F
+
+    def linearise(z):
+        """Residuals, and x eliminated by Newton: dx = dx0 + K dv; the reduced G and e there."""
+        Jz, F = jax.jacfwd(residuals, has_aux=True)(z)
+        r, e = F[:6], F[6:]
+        Jx, Jv, Ex, Ev = Jz[:6, :6], Jz[:6, 6:], Jz[6:, :6], Jz[6:, 6:]
+        M = jnp.linalg.solve(Jx, jnp.concatenate([r[:, None], Jv], axis=1))
+        dx0, K = -M[:, 0], -M[:, 1:]
+        return F, (dx0, K, Ev + Ex @ K, e + Ex @ dx0)
+
+    def merit(F):
+        return jnp.where(jnp.all(jnp.isfinite(F)), F @ F, jnp.inf)
+
+    def cond(c):
+        return ~c[-1]
+
+    def body(c):
+        z, F, lin, mu, nu, it, code, _ = c
+        dx0, K, G, e = lin
+        s = _lm_step(G, e, mu, prob.lo - z[6:], prob.hi - z[6:])
+        trial = z + jnp.concatenate([dx0 + K @ s, s])
+        F_t, lin_t = linearise(trial)
+        linear = e + G @ s  # the model: Newton takes r to 0, Gauss-Newton e to this
+        mu, nu, better = _damping(mu, nu, merit(F) - merit(F_t), merit(F) - linear @ linear)
+        z, F, lin = jax.tree.map(lambda a, b: jnp.where(better, a, b), (trial, F_t, lin_t), (z, F, lin))
+        code, done = _reach_status(F[6:], lin[2], z[6:], mu, it + 1, prob, tol, max_steps)
+        boundary_ok = jnp.max(jnp.abs(F[:6])) <= prob.solver.tol
+        # reached or stationary only once the boundary residual has converged too
+        code = jnp.where(boundary_ok, code, jnp.int32(status.OUTER_LIMIT))
+        return z, F, lin, mu, nu, it + 1, code, done & (boundary_ok | (it + 1 >= max_steps) | (mu >= MU_GIVE_UP))
+
+    z0 = jnp.concatenate([scaled(robot, wrench0, F_s), v0])
+    F0, lin0 = linearise(z0)
+    code0, done0 = _reach_status(F0[6:], lin0[2], v0, MU_START, 0, prob, tol, max_steps)
+    init = (z0, F0, lin0, jnp.asarray(MU_START), jnp.asarray(2.0), 0, code0, done0)
+    z, F, _, _, _, it, code, _ = lax.while_loop(cond, body, init)
+    wrench = jnp.concatenate([z[:3] * F_s, z[3:6] * F_s * L])
+    return Reach(z[6:], wrench, F[6:], it, code)
+
+
+# ----------------------------------------------------------------------------- phase 2: optimise
+
+
+def optimise(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
+    """Phase 2: min phi(v) subject to e(v) = 0 and the bounds, by SQP (damped BFGS Hessian of the
+    Lagrangian, exact active-set subproblems, l1 merit phi / phi_0 + rho |e|_1)."""
+    ev0 = evaluate(v0, wrench0, prob, plan)
+    scale = jnp.maximum(jnp.abs(ev0.phi), 1e-300)
+    n = v0.shape[0]
+
+    def lagrangian_gradient(ev, lam):
+        return ev.dphi / scale + ev.G.T @ lam
+
+    def cond(c):
+        return ~c[-1]
+
+    def body(c):
+        v, ev, H, rho, mu, it, code, _ = c
+        s, lam, ok = box_qp(H + mu * jnp.eye(n), ev.dphi / scale, prob.lo - v, prob.hi - v, J=ev.G, c=-ev.e)
+        s = jnp.where(ok, s, _lm_step(ev.G, ev.e, jnp.maximum(mu, MU_START), prob.lo - v, prob.hi - v))
+        lam = jnp.where(ok, lam, 0.0)
+        converged = ok & (mu == 0) & (jnp.max(jnp.abs(s)) <= STEP_TOL) & (jnp.max(jnp.abs(ev.e)) <= tol)
+        trial = evaluate(v + s, ev.wrench, prob, plan)
+        rho = jnp.maximum(rho, 2 * jnp.max(jnp.abs(lam), initial=0.0) + 1e-6)
+
+        def merit(ev):
+            return jnp.where(
+                jnp.all(jnp.isfinite(ev.e)) & (ev.code == status.SUCCESS), ev.phi / scale + rho * jnp.sum(jnp.abs(ev.e)), jnp.inf
+            )
+
+        better = ~converged & (merit(trial) <= merit(ev) - 1e-15 * jnp.abs(merit(ev)))
+        y = lagrangian_gradient(trial, lam) - lagrangian_gradient(ev, lam)
+        H_new = _damped_bfgs(H, s, y)
+        v, ev, H = jax.tree.map(lambda a, b: jnp.where(better, a, b), (v + s, trial, H_new), (v, ev, H))
+        mu = jnp.where(better, jnp.where(mu < 1e-10, 0.0, mu / 10), jnp.maximum(10 * mu, 1e-6))
+        done = converged | (it + 1 >= max_steps) | (mu >= MU_GIVE_UP)
+        code = jnp.where(
+            converged, status.SUCCESS, jnp.where(mu >= MU_GIVE_UP, status.CONTINUATION_EXHAUSTED, status.OUTER_LIMIT)
+        )
+        return v, ev, H, rho, mu, it + 1, code, done
+
+    init = (v0, ev0, jnp.eye(n), jnp.asarray(1.0), jnp.asarray(0.0), 0, jnp.int32(status.OUTER_LIMIT), ev0.code != status.SUCCESS)
+    v, ev, _, _, _, it, code, _ = lax.while_loop(cond, body, init)
+    code = jnp.where(ev0.code == status.SUCCESS, code, ev0.code)
+    return Reach(v, ev.wrench, ev.e, it, code)
+
+
+def _damped_bfgs(H, s, y):
+    """Powell's damped BFGS update: stays positive definite whatever the curvature along s."""
+    Hs = H @ s
+    sHs = s @ Hs
+    sy = s @ y
+    theta = jnp.where(sy >= 0.2 * sHs, 1.0, 0.8 * sHs / jnp.where(sHs - sy == 0, 1.0, sHs - sy))
+    r = theta * y + (1 - theta) * Hs
+    sr = s @ r
+    update = H - jnp.outer(Hs, Hs) / jnp.where(sHs > 0, sHs, 1.0) + jnp.outer(r, r) / jnp.where(sr > 0, sr, 1.0)
+    return jnp.where((sHs > 1e-300) & (sr > 1e-300), update, H)
+
+
+# ----------------------------------------------------------------------------- the solve and its derivatives
+
+
+def default_start(prob: Problem, plan: Plan):
+    """A start from the target alone: the circular arc from the base (tangent +z) through the
+    target's position fixes a bending angle; the tendons on that side pull with the tension whose
+    moment bends the silicone so far, no tube. Gravity and loads are left to the iteration."""
+    robot, p = prob.robot, prob.target.position
+    lateral = jnp.hypot(p[0], p[1])
+    angle = 2 * jnp.arctan2(lateral, jnp.maximum(p[2], 0.0) + 1e-300 * 0)
+    moment = angle / robot.length * robot.bending_stiffness(False)[0]
+    side = jnp.arctan2(p[1], p[0])
+    share = jnp.maximum(jnp.cos(jnp.asarray(robot.tendon_angles) - side), 0.0)
+    tensions = moment * share / jnp.maximum(jnp.sum(share**2), 1e-12) / robot.tendon_offset
+    v = [tensions[jnp.asarray(plan.tendons)] / prob.tension_scale] if plan.tendons else []
+    if plan.insertion:
+        v.append(jnp.reshape(prob.lo[-1], (1,)))
+    return jnp.clip(jnp.concatenate(v), prob.lo, prob.hi)
+
+
+class Found(NamedTuple):
+    v: jax.Array
+    wrench: jax.Array
+    steps: jax.Array
+    code: jax.Array
+
+
+def starts(v0, prob: Problem, plan: Plan):
+    """Where phase 1 starts: v0, then, should it end short of the target, fresh starts in turn:
+    no tension with the tube out and in, a quarter of the tension range everywhere with half the
+    tube, and the arc start (``default_start``) with the tube in."""
+    lo, hi = prob.lo, prob.hi
+    k = len(plan.tendons)
+
+    def with_insertion(v, where):
+        return v.at[k].set(lo[k] + where * (hi[k] - lo[k])) if plan.insertion else v
+
+    quarter = lo + 0.25 * (hi - lo)
+    arc = default_start(prob, plan)
+    return jnp.stack(
+        [v0, with_insertion(lo, 0.0), with_insertion(lo, 1.0), with_insertion(quarter, 0.5), with_insertion(arc, 1.0)]
+    )
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(3, 4, 5))
+def find(prob: Problem, v0, wrench0, plan: Plan, tol, max_steps) -> Found:
+    """The IK solution in scaled inputs (see the module docstring), from v0 (and the converged or
+    NaN base wrench there), then from ``starts`` until one reaches (the nearest pose of them all
+    otherwise); its derivatives by implicit differentiation (``_find_jvp``)."""
+    candidates = starts(v0, prob, plan)
+    reach = reach_augmented if plan.method == "augmented" else reach_nested
+
+    def cond(c):
+        k, best, _ = c
+        return (k < len(candidates)) & (best.code != status.SUCCESS)
+
+    def body(c):
+        k, best, steps = c
+        v, guess = candidates[k], jnp.where(k == 0, wrench0, jnp.nan)
+        sol0 = solution_and_compliance(prob.robot, actuation_of(v, prob, plan), prob.load, prob.gravity, guess, prob.solver)[0]
+        r = reach(v, sol0.base_wrench, prob, plan, tol, max_steps)
+        r = r._replace(code=jnp.where(sol0.result == status.SUCCESS, r.code, sol0.result))
+        closer = (r.code == status.SUCCESS) | (r.e @ r.e < best.e @ best.e)
+        return k + 1, jax.tree.map(lambda a, b: jnp.where(closer, a, b), r, best), steps + r.steps
+
+    none = Reach(v0, jnp.full(6, jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT))
+    _, r, steps = lax.while_loop(cond, body, (0, none, 0))
+    r = r._replace(steps=steps)
+    if plan.objective is not None:
+        o = optimise(r.v, r.wrench, prob, plan, tol, max_steps)
+        use = r.code == status.SUCCESS
+        r = jax.tree.map(lambda a, b: jnp.where(use, a, b), Reach(o.v, o.wrench, o.e, r.steps + o.steps, o.code), r)
+    return Found(r.v, r.wrench, r.steps, r.code)
+
+
+@find.defjvp
+def _find_jvp(plan, tol, max_steps, primals, tangents):
+    """Implicit differentiation of the optimality conditions at the solution: inputs at a bound
+    follow the bound; the others keep e = 0 (the minimum-norm change when the task does not fix
+    them) or, with an objective, the KKT conditions grad phi + G^T lam = 0, e = 0."""
+    prob, v0, wrench0 = primals
+    dprob = tangents[0]
+    found = find(prob, v0, wrench0, plan, tol, max_steps)
+    v, wrench = found.v, found.wrench
+
+    def at(prob, v):
+        return evaluate(v, wrench, prob, plan)
+
+    ev, dev = jax.jvp(lambda prob: at(prob, v), (prob,), (dprob,))
+    lo_active, hi_active = v <= prob.lo, v >= prob.hi
+    dv_bound = jnp.where(lo_active, dprob.lo, jnp.where(hi_active, dprob.hi, 0.0))
+    free = ~(lo_active | hi_active)
+    G = ev.G * free[None, :]
+    rhs_e = dev.e + ev.G @ dv_bound
+    if plan.objective is None:
+        dv = -jnp.linalg.pinv(G) @ rhs_e
+    else:
+        scale = jnp.maximum(jnp.abs(ev.phi), 1e-300)
+        lam = -jnp.linalg.pinv(G.T) @ (ev.dphi * free / scale)
+
+        def lagrangian_gradient(prob, v):
+            e = at(prob, v)
+            return e.dphi / scale + e.G.T @ lam
+
+        W, dL = (
+            jax.jacfwd(lambda v: lagrangian_gradient(prob, v))(v),
+            jax.jvp(lambda p: lagrangian_gradient(p, v), (prob,), (dprob,))[1],
+        )
+        n, m = v.shape[0], ev.e.shape[0]
+        F = free.astype(v.dtype)
+        K = jnp.block([[W * F[:, None] * F[None, :] + jnp.diag(1 - F), G.T], [G, -1e-14 * jnp.eye(m)]])
+        rhs = jnp.concatenate([-(dL + W @ dv_bound) * F, -rhs_e])
+        dv = jnp.linalg.solve(K, rhs)[:n]
+    dv = jnp.where(free, dv, dv_bound)
+    zero = jax.tree.map(_zero_like, (wrench, found.steps, found.code))
+    return found, Found(dv, *zero)
+
+
+def _zero_like(x):
+    x = jnp.asarray(x)
+    return jnp.zeros_like(x) if jnp.issubdtype(x.dtype, jnp.inexact) else np.zeros(x.shape, jax.dtypes.float0)
+
+
+# ----------------------------------------------------------------------------- entry points
+
+
+@functools.partial(jax.jit, static_argnames=("plan", "tol", "max_steps"))
+def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, tol, max_steps):
+    """``find``, then the forward solve there and the result's numbers; (IKResult, wrench)."""
+    found = find(prob, v0, wrench0, plan, tol, max_steps)
+    act = actuation_of(found.v, prob, plan)
+    sol, C = solution_and_compliance(prob.robot, act, prob.load, prob.gravity, found.wrench, prob.solver)
+    position, orientation = pose_errors(sol.tip_position, sol.tip_rotation, prob.target)
+    phi = jnp.nan if plan.objective is None else objective_value(sol, C, act, prob, plan)
+    code = jnp.where(sol.result == status.SUCCESS, found.code, sol.result).astype(jnp.int32)
+    return IKResult(act, sol, position, orientation, jnp.asarray(phi, float), found.steps, code), sol.base_wrench
+
+
+def inverse_kinematics(
+    robot: Robot,
+    target,
+    *,
+    load: TipLoad | None = None,
+    tendons=None,
+    insertion=None,
+    bounds: Bounds = DEFAULT_BOUNDS,
+    objective=None,
+    direction=None,
+    preferred_insertion=None,
+    guess: Actuation | None = None,
+    method: str = "augmented",
+    tol: float = TOL,
+    max_steps: int = MAX_STEPS,
+    gravity=STANDARD_GRAVITY,
+    solver: SolverOptions = DEFAULT_SOLVER,
+    throw: bool = True,
+) -> IKResult:
+    """Tensions and insertion that put the tip at ``target`` (paper Secs. V.A, V.B; module docstring).
+
+    Args:
+        robot: the robot.
+        target: a Target (or a tip position [m], (3,)); a leading batch axis on its fields solves
+            many targets at once (``jax.vmap``).
+        load: tip force [N] and moment [N m], world frame, held while reaching; none by default.
+        tendons: the free tendons, numbered from 1 like the paper (default all); the others keep
+            the tension ``guess`` gives them (default 0).
+        insertion: None (free) or a fixed insertion depth [m].
+        bounds: Bounds on the free tensions [N] and the insertion [m]; never violated.
+        objective: among redundant solutions (free inputs beyond the task's dimensions), the one
+            that minimises "stiffness" (the tip compliance along ``direction`` [m/N], or without a
+            direction the largest eigenvalue of its symmetric part), "tension" (total squared
+            tension: no needless co-contraction), "insertion" (squared distance from
+            ``preferred_insertion`` [m], default L / 2), or a callable f(Solution, Actuation) ->
+            scalar, differentiable. None: the first solution found.
+        direction: world direction for the "stiffness" objective, (3,), nonzero.
+        preferred_insertion: for the "insertion" objective [m], in [0, L].
+        guess: an Actuation to start from (free inputs) and to take the fixed tensions from.
+        method: "augmented" (shooting unknowns and inputs iterated together) or "nested"
+            (a converged forward solve at every step).
+        tol: tolerance on the scaled task residual (position error / L; orientation error [rad]).
+        max_steps: most IK steps, both phases together (the IK's own limit).
+        gravity, solver: as for ``tdct.solve``.
+        throw: raise ConvergenceError when the IK failed (not for UNREACHABLE: an unreachable
+            target is an answer, the nearest pose); default True, as everywhere.
+
+    Returns:
+        IKResult.
+    """
+    prob, plan, v0, wrench0 = _problem(
+        robot,
+        target,
+        load,
+        tendons,
+        insertion,
+        bounds,
+        objective,
+        direction,
+        preferred_insertion,
+        guess,
+        method,
+        tol,
+        max_steps,
+        gravity,
+        solver,
+    )
+    batched = jnp.ndim(prob.target.position) == 2
+    run = functools.partial(_solve_ik, plan=plan, tol=float(tol), max_steps=int(max_steps))
+    if batched:
+        result, _ = jax.vmap(lambda t, v: run(prob._replace(target=t), v, wrench0))(prob.target, v0)
+    else:
+        result, _ = run(prob, v0, wrench0)
+    _check(result, throw, max_steps)
+    return result
+
+
+def track(robot: Robot, targets: Target, **options) -> IKResult:
+    """Inverse kinematics along a sequence of targets (a Target whose fields have a leading axis),
+    each started from the last solution, as one compiled ``lax.scan``: the real-time control case.
+
+    Args:
+        robot, targets: the robot and the targets in order.
+        **options: as for ``inverse_kinematics`` (``guess`` starts the first step).
+
+    Returns:
+        IKResult with a leading axis over the targets.
+    """
+    throw = options.pop("throw", True)
+    first = jax.tree.map(lambda a: a[0], targets)
+    prob, plan, v0, wrench0 = _problem(robot, first, **_ik_options(options))
+    tol, max_steps = float(options.get("tol", TOL)), int(options.get("max_steps", MAX_STEPS))
+    result = _track(prob, targets, v0, wrench0, plan, tol, max_steps)
+    _check(result, throw, max_steps)
+    return result
+
+
+@functools.partial(jax.jit, static_argnames=("plan", "tol", "max_steps"))
+def _track(prob, targets, v0, wrench0, plan, tol, max_steps):
+    def step(carry, target):
+        v, wrench = carry
+        result, wrench_new = _solve_ik(prob._replace(target=target), v, wrench, plan, tol, max_steps)
+        ok = result.result == status.SUCCESS
+        v_new = scaled_inputs(result.actuation, prob, plan)
+        return (jnp.where(ok, v_new, v), jnp.where(ok, wrench_new, wrench)), result
+
+    return lax.scan(step, (v0, wrench0), targets)[1]
+
+
+def _ik_options(options: dict) -> dict:
+    names = (
+        "load",
+        "tendons",
+        "insertion",
+        "bounds",
+        "objective",
+        "direction",
+        "preferred_insertion",
+        "guess",
+        "method",
+        "tol",
+        "max_steps",
+        "gravity",
+        "solver",
+    )
+    unknown = sorted(set(options) - set(names))
+    if unknown:
+        raise TypeError(f"unknown argument(s) {unknown}; allowed: {sorted(names)} and throw")
+    defaults = dict(
+        load=None,
+        tendons=None,
+        insertion=None,
+        bounds=Bounds(),
+        objective=None,
+        direction=None,
+        preferred_insertion=None,
+        guess=None,
+        method="augmented",
+        tol=TOL,
+        max_steps=MAX_STEPS,
+        gravity=STANDARD_GRAVITY,
+        solver=DEFAULT_SOLVER,
+    )
+    return defaults | options
+
+
+def _check(result: IKResult, throw: bool, max_steps: int) -> None:
+    """``throw`` for everything but UNREACHABLE, which is an answer."""
+    code = jnp.where(result.result == status.UNREACHABLE, status.SUCCESS, result.result)
+    status.check(code, throw=throw, what="the inverse kinematics", max_steps=max_steps)
+
+
+def _problem(
+    robot,
+    target,
+    load,
+    tendons,
+    insertion,
+    bounds,
+    objective,
+    direction,
+    preferred_insertion,
+    guess,
+    method,
+    tol,
+    max_steps,
+    gravity,
+    solver,
+):
+    """Checks the arguments; returns (Problem, Plan, start v0, start wrench (NaN))."""
+    if not isinstance(target, Target):
+        target = Target(target)
+    load = TipLoad() if load is None else load
+    base = Actuation(np.zeros(robot.n_tendons)) if guess is None else guess
+    check_inputs(robot, base, load, solver)
+    n_t = robot.n_tendons
+    tendons = tuple(range(1, n_t + 1)) if tendons is None else tuple(tendons)
+    for t in tendons:
+        if isinstance(t, bool) or not isinstance(t, (int, np.integer)) or not 1 <= t <= n_t:
+            raise ValueError(f"tendons = {tendons!r}: each must be a tendon number in [1, {n_t}] (tendon 1 at body +y)")
+    if len(set(tendons)) != len(tendons):
+        raise ValueError(f"tendons = {tendons!r} names a tendon twice")
+    L = float(robot.length) if is_concrete(robot.length) else robot.length
+    if insertion is not None:
+        insertion = as_array("insertion", insertion, (), unit=" m")
+        check_range("insertion", insertion, 0.0, L, unit=f" m (0 to the robot length {float(L):g} m)") if is_concrete(L) else None
+        base = Actuation(base.tensions, insertion)
+    if not tendons and insertion is not None:
+        raise ValueError("nothing is free: give at least one free tendon (tendons=) or leave the insertion free")
+    if not isinstance(bounds, Bounds):
+        raise TypeError(f"bounds must be a tdct.Bounds, got {type(bounds).__name__}")
+    ins_bounds = (0.0, L) if bounds.insertion is None else bounds.insertion
+    if bounds.insertion is not None and is_concrete(bounds.insertion):
+        check_range("bounds.insertion", bounds.insertion, 0.0, float(L), unit=f" m (0 to the robot length {float(L):g} m)")
+    if objective is not None and not callable(objective):
+        check_choice("objective", objective, OBJECTIVES)
+    if direction is not None:
+        direction = as_array("direction", direction, (3,))
+        if is_concrete(direction) and not np.linalg.norm(direction) > 0:
+            raise ValueError("direction = [0, 0, 0]: the stiffness direction must be a nonzero vector")
+        direction = direction / jnp.linalg.norm(direction)
+    preferred = 0.5 * L if preferred_insertion is None else as_array("preferred_insertion", preferred_insertion, (), unit=" m")
+    if preferred_insertion is not None and is_concrete(preferred):
+        check_range("preferred_insertion", preferred, 0.0, float(L), unit=" m")
+    check_choice("method", method, METHODS)
+    tol = as_array("tol", tol, ())
+    check_range("tol", tol, 0.0, lo_open=True)
+    check_integer("max_steps", max_steps)
+    scale = jnp.maximum(jnp.asarray(bounds.tension[1]), 1.0)
+    lo = [jnp.full(len(tendons), bounds.tension[0]) / scale] + (
+        [jnp.reshape(ins_bounds[0] / L, (1,))] if insertion is None else []
+    )
+    hi = [jnp.full(len(tendons), bounds.tension[1]) / scale] + (
+        [jnp.reshape(ins_bounds[1] / L, (1,))] if insertion is None else []
+    )
+    prob = Problem(
+        robot=robot,
+        target=target,
+        load=load,
+        gravity=jnp.asarray(gravity_vector(gravity)),
+        base=base,
+        lo=jnp.concatenate(lo),
+        hi=jnp.concatenate(hi),
+        tension_scale=scale,
+        solver=solver,
+        preferred_insertion=jnp.asarray(preferred, float),
+        direction=jnp.full(3, jnp.nan) if direction is None else jnp.asarray(direction, float),
+    )
+    plan = Plan(tuple(t - 1 for t in tendons), insertion is None, objective, method)
+    batched = jnp.ndim(target.position) == 2
+    if guess is None:
+        start = jax.vmap(lambda t: default_start(prob._replace(target=t), plan))(target) if batched else default_start(prob, plan)
+    else:
+        start = jnp.clip(scaled_inputs(guess, prob, plan), prob.lo, prob.hi)
+        start = jnp.broadcast_to(start, (len(target.position),) + start.shape) if batched else start
+    return prob, plan, start, jnp.full(6, jnp.nan)
