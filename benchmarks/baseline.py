@@ -1,7 +1,7 @@
 """The numpy/scipy baseline: the paper's approach, checked against tdct_jax and timed beside it.
 
 What a user would otherwise write, ported the way the paper's MATLAB code works: the same model as
-tdct_jax's defaults (transition "balanced", tendon_model "exact"; see shared model-notes and
+tdct_jax's defaults (transition "balanced", tendon_model "exact"; see docs/model.md and
 tdct_jax/segments.py) with the right-hand side a Python function on numpy arrays, a Python loop of
 classical RK4 steps per segment (R re-orthonormalised after each step, as in tdct_jax), shooting
 on the six base unknowns N(0), M(0) with scipy.optimize.fsolve (MINPACK hybrd, forward-difference

@@ -31,6 +31,8 @@ FIG9_TENSIONS = tuple(float(t) for t in range(11))
 """Figs. 8B and 9: tendon-1 tensions [N], 0 to 10 N in 1 N steps."""
 FIG9_INSERTIONS = tuple(MM * d for d in range(0, 151, 10))
 """Figs. 8B, 9 and 11: insertion depths [m], 0 to 150 mm in 10 mm steps."""
+FIG10_TENSION = 6.0
+"""Fig. 10: tension on tendon 1 [N] (the paper says only "constant"; 6 N is ours)."""
 FIG11_TENSIONS = (0.0, 2.0, 4.0, 6.0, 8.0)
 FIG11_INSERTIONS = FIG9_INSERTIONS
 PAPER_LAMBDA2_MM_PER_N = (203.5, 86.1)
@@ -71,7 +73,7 @@ def tip_pose_grid(robot: Robot, tensions=FIG9_TENSIONS, insertions=FIG9_INSERTIO
     return sweep(robot, grid={"tensions": tendon1(robot, tensions), "insertion": np.asarray(insertions)}, **options)
 
 
-def fig10_compliances(robot: Robot, tension: float = 6.0, insertions=(0.0, 0.05, 0.10, 0.15), **solve_options) -> dict:
+def fig10_compliances(robot: Robot, tension: float = FIG10_TENSION, insertions=(0.0, 0.05, 0.10, 0.15), **solve_options) -> dict:
     """Fig. 10: CM [m/N] for several insertion depths [m] at one tension on tendon 1, no tip load."""
     (tau,) = tendon1(robot, [tension])
     return {f"insertion {1e3 * d:.0f} mm": compliance(robot, Actuation(tau, d), TipLoad(), **solve_options) for d in insertions}

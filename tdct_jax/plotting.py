@@ -207,17 +207,20 @@ def plot_fig8a(res, path: str | Path | None = None):
     for i, (d, c) in enumerate(zip(depths, colours, strict=True)):
         p = res.position[i, 0] * 1e3
         tube = _tube_mask(res.s[i, 0], d)
-        ax.plot(p[:, 2], p[:, 1], color=c, lw=2, label=f"d = {d * 1e3:.0f} mm")
+        ax.plot(p[:, 2], p[:, 1], color=c, lw=2, zorder=3, label=f"d = {d * 1e3:.0f} mm")
         if tube.any():
-            ax.plot(p[tube, 2], p[tube, 1], color=c, lw=5, alpha=0.5, solid_capstyle="butt")
+            ax.plot(p[tube, 2], p[tube, 1], color="black", lw=6, zorder=2, solid_capstyle="butt")
+            ax.plot(*p[tube][-1, [2, 1]], "o", mfc="white", mec="black", ms=6, zorder=4)
+    ax.plot([], [], color="black", lw=6, label="inside the tube")
+    ax.plot([], [], "o", mfc="white", mec="black", ms=6, label="tube end (s = d)")
     tips = res.tip_position[:, 0] * 1e3
     ax.annotate("", xy=tips[-1, [2, 1]], xytext=tips[0, [2, 1]], arrowprops=dict(arrowstyle="->", color="red", lw=2))
     ax.axhline(0, color="0.8", lw=0.8, zorder=0)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("z [mm]")
     ax.set_ylabel("y [mm]")
-    ax.set_title(f"Shape as the tube is inserted (tendon 1 at {tension:g} N; thick: with tube)")
-    ax.legend(fontsize=8, loc="lower left")
+    ax.set_title(f"Shape as the tube is inserted: {tension:g} N on tendon 1, no tip load (paper Fig. 8A)")
+    ax.legend(fontsize=8, loc="upper left")
     ax.grid(alpha=0.3)
     return _finish(fig, path)
 
@@ -252,7 +255,7 @@ def plot_fig9(res, path: str | Path | None = None):
     taus = np.asarray(res.axes["tensions"])[:, 0]
     values = (res.tip_position[..., 2] * 1e3, res.tip_position[..., 1] * 1e3, np.degrees(res.tip_angle))
     labels = ("(A) z_tip [mm]", "(B) y_tip [mm]", "(C) theta_tip [deg]")
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4.4))
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.4))
     colours = plt.cm.viridis(np.linspace(0, 0.95, len(taus)))
     for ax, v, label in zip(axes, values, labels, strict=True):
         for tau, c, row in zip(taus, colours, v, strict=True):
@@ -260,7 +263,7 @@ def plot_fig9(res, path: str | Path | None = None):
         ax.set_xlabel("insertion depth [mm]")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-    axes[2].legend(title="tendon 1", fontsize=7, ncol=2)
+    axes[2].legend(title="tendon 1 tension", fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     fig.suptitle("Tip pose against tube insertion, no tip load (paper Fig. 9)")
     return _finish(fig, path)
 
@@ -272,8 +275,10 @@ def plot_fig13(results: dict, path: str | Path | None = None):
         results: {tension [N]: GridResult of ``paper.fig13_optima``}, one panel each.
     """
     plt = _pyplot()
-    fig, axes = plt.subplots(1, len(results), figsize=(6.2 * len(results), 4.6), squeeze=False)
-    for ax, (tension, r), letter in zip(axes[0], results.items(), "ABCD", strict=False):
+    fig, axes = plt.subplots(1, len(results), figsize=(6.2 * len(results) + 1.3, 4.6), squeeze=False)
+    all_masses = [np.asarray(r.axes["tip_mass"]).tolist() for r in results.values()]
+    shared = all(m == all_masses[0] for m in all_masses)  # then one legend serves every panel
+    for k, (ax, (tension, r), letter) in enumerate(zip(axes[0], results.items(), "ABCD", strict=False)):
         masses = np.asarray(r.axes["tip_mass"]) * 1e3
         colours = plt.cm.cividis(np.linspace(0, 0.9, len(masses)))
         for i, (m, c) in enumerate(zip(masses, colours, strict=True)):
@@ -284,7 +289,8 @@ def plot_fig13(results: dict, path: str | Path | None = None):
         ax.set_ylabel("y_tip [mm]")
         ax.set_title(f"({letter}) tendon 1 at {tension:g} N")
         ax.grid(alpha=0.3)
-        ax.legend(title="tip mass", fontsize=8)
+        if not shared or k == len(results) - 1:
+            ax.legend(title="tip mass", fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     fig.suptitle("Tip height against insertion for several tip masses (paper Fig. 13)")
     return _finish(fig, path)
 
@@ -313,5 +319,5 @@ def plot_fig14(res, paper_points=None, path: str | Path | None = None):
     ax.set_ylabel("load capacity (tip reaches y = 0) [g]")
     ax.set_title("Tip load capacity against insertion (paper Fig. 14)")
     ax.grid(alpha=0.3)
-    ax.legend(title="tendon 1", fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.legend(title="tendon 1 tension", fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     return _finish(fig, path)

@@ -134,10 +134,9 @@ def _fig9(robot, grids, out, opts, say):
 
 
 def _fig10(robot, grids, out, opts, say):
-    CMs = paper.fig10_compliances(robot)
-    plotting.plot_compliance_ellipses(
-        CMs, out / "fig10_compliance_ellipses.png", title="Compliance ellipses at 6 N (paper Fig. 10)"
-    )
+    CMs = paper.fig10_compliances(robot, paper.FIG10_TENSION)
+    title = f"Compliance ellipses (paper Fig. 10)\n{paper.FIG10_TENSION:g} N on tendon 1, no tip load"
+    plotting.plot_compliance_ellipses(CMs, out / "fig10_compliance_ellipses.png", title=title)
     return []
 
 

@@ -241,7 +241,7 @@ class Robot:
         return self.E_silicone / (2 * (1 + self.nu_silicone))
 
     def shear_stiffness(self):
-        """K_se = diag(G1 A1, G1 A1, E1 A1) of the silicone [N] (model-notes)."""
+        """K_se = diag(G1 A1, G1 A1, E1 A1) of the silicone [N] (docs/model.md)."""
         A = self.area_silicone
         return jnp.stack([self.G_silicone * A, self.G_silicone * A, self.E_silicone * A])
 

@@ -1,4 +1,4 @@
-"""The two Cosserat segments as pure vector fields (paper eqs. 1 and 23-30, model-notes).
+"""The two Cosserat segments as pure vector fields (paper eqs. 1 and 23-30; docs/model.md).
 
 Both segments carry the same state: position p, rotation R (body to world), and the *total*
 internal force N = n + sum_t tau_t t_t and moment M = m + sum_t (R r_t) x tau_t t_t of rod plus
@@ -174,7 +174,7 @@ def vector_field(seg: Segment, gravity):
         dM = -jnp.cross(dp, y.N)
         if not seg.tilt:
             # eq. 26 as printed is not the derivative of a total moment; this is what it adds
-            # (zero unless the robot twists, model-notes).
+            # (zero unless the robot twists; docs/model.md, segment "backbone").
             dM = dM - y.R @ jnp.sum(seg.tau[:, None] * jnp.cross(E3[None], jnp.cross(u[None], seg.r)), 0)
         return State(dp, y.R @ hat(u), -seg.rho * gravity, dM)
 
