@@ -12,6 +12,11 @@ from .data import Experiment as Experiment  # noqa: E402
 from .data import read_experiment as read_experiment  # noqa: E402
 from .data import read_experiments as read_experiments  # noqa: E402
 from .data import write_experiment as write_experiment  # noqa: E402
+from .ik import Bounds as Bounds  # noqa: E402
+from .ik import IKResult as IKResult  # noqa: E402
+from .ik import Target as Target  # noqa: E402
+from .ik import inverse_kinematics as inverse_kinematics  # noqa: E402
+from .ik import track as track  # noqa: E402
 from .loads import STANDARD_GRAVITY as STANDARD_GRAVITY  # noqa: E402
 from .loads import Actuation as Actuation  # noqa: E402
 from .loads import TipLoad as TipLoad  # noqa: E402

@@ -17,6 +17,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from . import status
 from .checks import interval
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .mechanics import compliance, compliance_ellipsoid
@@ -27,7 +28,7 @@ from .status import ConvergenceError
 
 COMPILE_CACHE_ENV = "TDCT_COMPILE_CACHE"
 """Environment variable: a folder for the CLI's compilation cache, or 0 / off for none."""
-ON_CPU = ("solve", "compliance", "synth", "calibrate")
+ON_CPU = ("solve", "compliance", "synth", "calibrate", "ik")
 """Verbs that run on the CPU even where an accelerator is the default: single solves and small
 batches are faster there (each small operation on a GPU is a kernel launch)."""
 
@@ -230,6 +231,26 @@ def _parser() -> argparse.ArgumentParser:
     y.add_argument("--noise-mm", type=_finite, default=0.1, help="Gaussian noise per coordinate in mm (default 0.1)")
     y.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     y.add_argument("--points", type=int, default=33, help="points per shape, base to tip (default 33)")
+    i = verbs.add_parser(
+        "ik",
+        parents=[described],
+        help="inverse kinematics: tensions and insertion that put the tip at a target (Secs. V.A, V.B)",
+        epilog=LISTS_HELP + " Exit codes: 0 reached, 1 unreachable or failed (the nearest pose is printed), 2 bad input.",
+    )
+    i.add_argument("--target-mm", type=_floats(3), required=True, metavar="X,Y,Z", help="target tip position in mm, world frame")
+    i.add_argument("--tip-angle-deg", type=_finite, help="also reach this in-plane tip angle in degrees (z-y plane, toward +y)")
+    i.add_argument("--insertion-mm", type=_finite, help="fix the tube insertion at this depth in mm (default: free)")
+    i.add_argument("--tendons", type=_floats(), metavar="1,3", help="the free tendons, numbered from 1 (default all)")
+    i.add_argument("--max-tension-n", type=_finite, default=10.0, help="largest tension of a free tendon in N (default 10)")
+    i.add_argument("--tip-mass-g", type=_finite, default=0.0, help="tip mass in grams held while reaching (default 0)")
+    i.add_argument(
+        "--objective", choices=["stiffness", "tension"], help="among redundant solutions, the stiffest or least tension"
+    )
+    i.add_argument(
+        "--direction", type=_floats(3), metavar="DX,DY,DZ", help="world direction for --objective stiffness (default: along -y)"
+    )
+    i.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    i.add_argument("--plot", metavar="ik.png", help="save a side view and a 3D view of the shape with the target")
     k = verbs.add_parser("calibrate", parents=[described], help="fit Robot fields to measured shape files (Sec. III.B)")
     k.add_argument("files", nargs="+", metavar="FILE", help="shape files (CSV, see tdct_jax.data) or folders of them")
     k.add_argument("--params", default="E_silicone", help="comma-separated Robot fields to fit (default E_silicone)")
@@ -426,12 +447,98 @@ def _calibrate_command(args) -> int:
     return 0
 
 
+def _ik_command(args) -> int:
+    from . import ik
+
+    robot = _robot(args)
+    solver = _solver(args)
+    length_mm = 1e3 * float(robot.length)
+    check_flag("--max-tension-n", args.max_tension_n, 0.0, unit=" N")
+    check_flag("--tip-mass-g", args.tip_mass_g, 0.0, unit=" g")
+    if args.insertion_mm is not None:
+        check_flag("--insertion-mm", args.insertion_mm, 0.0, length_mm, " mm")
+    tendons = None
+    if args.tendons is not None:
+        check_flag("--tendons", args.tendons, 1, robot.n_tendons)
+        if any(t != int(t) for t in args.tendons) or len(set(args.tendons)) != len(args.tendons):
+            raise ValueError(
+                f"--tendons {','.join(f'{t:g}' for t in args.tendons)}: tendon numbers, each once, 1 to {robot.n_tendons}"
+            )
+        tendons = tuple(int(t) for t in args.tendons)
+    if args.direction is not None and not any(args.direction):
+        raise ValueError("--direction 0,0,0: the stiffness direction must be a nonzero vector")
+    if args.direction is not None and args.objective != "stiffness":
+        raise ValueError("--direction goes with --objective stiffness")
+    direction = args.direction or (0.0, -1.0, 0.0)
+    tip_angle = None if args.tip_angle_deg is None else np.radians(args.tip_angle_deg)
+    target = ik.Target(np.asarray(args.target_mm) * 1e-3, tip_angle=tip_angle)
+    result = ik.inverse_kinematics(
+        robot,
+        target,
+        load=TipLoad.from_mass(args.tip_mass_g * 1e-3),
+        tendons=tendons,
+        insertion=None if args.insertion_mm is None else args.insertion_mm * 1e-3,
+        bounds=ik.Bounds(tension=(0.0, args.max_tension_n)),
+        objective=args.objective,
+        direction=direction if args.objective == "stiffness" else None,
+        gravity=_gravity(args),
+        solver=solver,
+        throw=False,
+    )
+    code = int(result.result)
+    out = dict(
+        tensions_N=np.asarray(result.actuation.tensions).tolist(),
+        insertion_mm=1e3 * float(result.actuation.insertion),
+        tip_position_mm=(np.asarray(result.tip_position) * 1e3).tolist(),
+        tip_angle_deg=float(np.degrees(result.tip_angle)),
+        position_error_mm=1e3 * float(result.position_error),
+        status=status.NAMES[code],
+    )
+    if tip_angle is not None:
+        out["orientation_error_deg"] = float(np.degrees(result.orientation_error))
+    if args.objective is not None:
+        d = np.asarray(direction) / np.linalg.norm(direction)
+        CM = np.asarray(
+            compliance(
+                robot,
+                result.actuation,
+                TipLoad.from_mass(args.tip_mass_g * 1e-3),
+                **dict(gravity=_gravity(args), solver=solver),
+                throw=False,
+            )
+        )
+        out["compliance_along_direction_mm_per_N"] = 1e3 * float(d @ CM @ d)
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(f"status:            {out['status']} after {int(result.iterations)} steps")
+        print(f"tensions [N]:      {', '.join(f'{t:.4f}' for t in out['tensions_N'])}")
+        print(f"insertion [mm]:    {out['insertion_mm']:.3f}")
+        tip = out["tip_position_mm"]
+        print(
+            f"tip position [mm]: x = {tip[0]:.4f}, y = {tip[1]:.4f}, z = {tip[2]:.4f} ({out['position_error_mm']:.2e} mm from the target)"
+        )
+        print(f"tip angle [deg]:   {out['tip_angle_deg']:.3f}")
+        if "compliance_along_direction_mm_per_N" in out:
+            print(f"compliance along the direction [mm/N]: {out['compliance_along_direction_mm_per_N']:.3f}")
+    if args.plot:
+        from .plotting import plot_shape
+
+        title = f"IK to ({', '.join(f'{x:g}' for x in args.target_mm)}) mm: {out['status']}"
+        plot_shape(result.solution, float(result.actuation.insertion), args.plot, title=title, target=target.position)
+    if code not in (status.SUCCESS,):
+        print(f"tdct: error: {status.message(code, what='the inverse kinematics', max_steps=ik.MAX_STEPS)}", file=sys.stderr)
+        return 1
+    return 0
+
+
 COMMANDS = {
     "solve": _solve_command,
     "compliance": _compliance_command,
     "reproduce": _reproduce_command,
     "synth": _synth_command,
     "calibrate": _calibrate_command,
+    "ik": _ik_command,
 }
 
 

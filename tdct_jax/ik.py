@@ -35,7 +35,9 @@ import numpy as np
 from jax import lax
 
 from . import status
+from .batch import Kernel, run_batched
 from .checks import as_array, check_choice, check_integer, check_range, is_concrete
+from .linalg import solve_spd
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .mechanics import compliance_and_solution
 from .options import DEFAULT_SOLVER, SolverOptions
@@ -211,7 +213,7 @@ def box_qp(H, g, lo, hi, J=None, c=None):
             s, lam = sol[:n], sol[n:]
             consistent = jnp.max(jnp.abs(J @ s - c)) <= 1e-9 * (1.0 + jnp.max(jnp.abs(c)))
         else:
-            s, lam, consistent = jnp.linalg.solve(A, rhs), jnp.zeros(0), True
+            s, lam, consistent = solve_spd(A, rhs), jnp.zeros(0), True
         ok = jnp.all(jnp.isfinite(s)) & jnp.all(s >= lo - tol) & jnp.all(s <= hi + tol) & consistent
         return s, lam, ok, 0.5 * s @ H @ s + g @ s
 
@@ -525,15 +527,17 @@ def _damped_bfgs(H, s, y):
 
 def default_start(prob: Problem, plan: Plan):
     """A start from the target alone: the circular arc from the base (tangent +z) through the
-    target's position fixes a bending angle; the tendons on that side pull with the tension whose
-    moment bends the silicone so far, no tube. Gravity and loads are left to the iteration."""
+    target's position, less the sag that the tip load and the robot's weight would cause on their
+    own (a linear cantilever estimate), fixes a bending angle; the tendons on that side pull with
+    the tension whose moment bends the silicone so far, no tube."""
     robot, p = prob.robot, prob.target.position
-    lateral = jnp.hypot(p[0], p[1])
-    angle = 2 * jnp.arctan2(lateral, jnp.maximum(p[2], 0.0) + 1e-300 * 0)
-    moment = angle / robot.length * robot.bending_stiffness(False)[0]
-    side = jnp.arctan2(p[1], p[0])
-    share = jnp.maximum(jnp.cos(jnp.asarray(robot.tendon_angles) - side), 0.0)
-    tensions = moment * share / jnp.maximum(jnp.sum(share**2), 1e-12) / robot.tendon_offset
+    L, EI = robot.length, robot.bending_stiffness(False)[0]
+    sag = (prob.load.force * L**3 / 3 + robot.linear_density(False) * prob.gravity * L**4 / 8) / EI
+    sag = sag * jnp.minimum(1.0, 0.5 * L / jnp.maximum(jnp.linalg.norm(sag[:2]), 1e-300))
+    x, y = p[0] - sag[0], p[1] - sag[1]
+    angle = 2 * jnp.arctan2(jnp.hypot(x, y), jnp.maximum(p[2], 0.0))
+    share = jnp.maximum(jnp.cos(jnp.asarray(robot.tendon_angles) - jnp.arctan2(y, x)), 0.0)
+    tensions = angle / L * EI * share / jnp.maximum(jnp.sum(share**2), 1e-12) / robot.tendon_offset
     v = [tensions[jnp.asarray(plan.tendons)] / prob.tension_scale] if plan.tendons else []
     if plan.insertion:
         v.append(jnp.reshape(prob.lo[-1], (1,)))
@@ -564,8 +568,12 @@ def starts(v0, prob: Problem, plan: Plan):
     )
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(3, 4, 5))
-def find(prob: Problem, v0, wrench0, plan: Plan, tol, max_steps) -> Found:
+STARTS = 5
+"""Phase 1's starts: the given one, then four fresh ones (``starts``)."""
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(4, 5, 6))
+def find(prob: Problem, v0, wrench0, n_starts, plan: Plan, tol, max_steps) -> Found:
     """The IK solution in scaled inputs (see the module docstring), from v0 (and the converged or
     NaN base wrench there), then from ``starts`` until one reaches (the nearest pose of them all
     otherwise); its derivatives by implicit differentiation (``_find_jvp``)."""
@@ -574,7 +582,7 @@ def find(prob: Problem, v0, wrench0, plan: Plan, tol, max_steps) -> Found:
 
     def cond(c):
         k, best, _ = c
-        return (k < len(candidates)) & (best.code != status.SUCCESS)
+        return (k < n_starts) & (best.code != status.SUCCESS)
 
     def body(c):
         k, best, steps = c
@@ -600,9 +608,9 @@ def _find_jvp(plan, tol, max_steps, primals, tangents):
     """Implicit differentiation of the optimality conditions at the solution: inputs at a bound
     follow the bound; the others keep e = 0 (the minimum-norm change when the task does not fix
     them) or, with an objective, the KKT conditions grad phi + G^T lam = 0, e = 0."""
-    prob, v0, wrench0 = primals
+    prob, v0, wrench0, n_starts = primals
     dprob = tangents[0]
-    found = find(prob, v0, wrench0, plan, tol, max_steps)
+    found = find(prob, v0, wrench0, n_starts, plan, tol, max_steps)
     v, wrench = found.v, found.wrench
 
     def at(prob, v):
@@ -647,9 +655,9 @@ def _zero_like(x):
 
 
 @functools.partial(jax.jit, static_argnames=("plan", "tol", "max_steps"))
-def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, tol, max_steps):
+def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, tol, max_steps, n_starts=STARTS):
     """``find``, then the forward solve there and the result's numbers; (IKResult, wrench)."""
-    found = find(prob, v0, wrench0, plan, tol, max_steps)
+    found = find(prob, v0, wrench0, n_starts, plan, tol, max_steps)
     act = actuation_of(found.v, prob, plan)
     sol, C = solution_and_compliance(prob.robot, act, prob.load, prob.gravity, found.wrench, prob.solver)
     position, orientation = pose_errors(sol.tip_position, sol.tip_rotation, prob.target)
@@ -725,14 +733,48 @@ def inverse_kinematics(
         gravity,
         solver,
     )
-    batched = jnp.ndim(prob.target.position) == 2
-    run = functools.partial(_solve_ik, plan=plan, tol=float(tol), max_steps=int(max_steps))
-    if batched:
-        result, _ = jax.vmap(lambda t, v: run(prob._replace(target=t), v, wrench0))(prob.target, v0)
+    run = functools.partial(_solve_ik, tol=float(tol), max_steps=int(max_steps))
+    if jnp.ndim(prob.target.position) == 2:
+        result = _batched(run, prob, plan, v0, wrench0)
     else:
-        result, _ = run(prob, v0, wrench0)
+        result, _ = run(prob, v0, wrench0, plan)
     _check(result, throw, max_steps)
     return result
+
+
+def _batched(run, prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
+    """Many targets (a leading axis on ``prob.target``). With concrete values they run through the
+    batch engine in chunks, each target from its first start only; those that did not reach run
+    again from every start, so that a few hard targets do not hold up the rest. Traced (inside the
+    caller's jit or vmap): one vmap, every start allowed."""
+    if not all(is_concrete(x) for x in jax.tree.leaves((prob, v0))):
+        return jax.vmap(lambda t, v: run(prob._replace(target=t), v, wrench0, plan)[0])(prob.target, v0)
+    leaves, tree = jax.tree.flatten(prob.target)
+    points = {f"target{i}": np.asarray(leaf) for i, leaf in enumerate(leaves)} | {"v0": np.asarray(v0)}
+    kernel = Kernel(_ik_point, (("plan", plan), ("tree", tree)) + tuple(run.keywords.items()))
+    base = (prob._replace(target=None), wrench0)
+    out = run_batched(kernel, base, points | {"starts": np.ones(len(v0), np.int32)}, progress=False)
+    again = np.flatnonzero(out["result"] != status.SUCCESS)
+    if again.size:
+        retry = {k: v[again] for k, v in points.items()} | {"starts": np.full(again.size, STARTS, np.int32)}
+        for k, v in run_batched(kernel, base, retry, progress=False).items():
+            out[k][again] = v
+    return _from_outputs(out, run, prob, plan, v0, wrench0)
+
+
+def _ik_point(base, point, kernel: Kernel) -> dict:
+    prob, wrench0 = base
+    target = jax.tree.unflatten(kernel.option("tree"), [point[f"target{i}"] for i in range(kernel.option("tree").num_leaves)])
+    options = dict(tol=kernel.option("tol"), max_steps=kernel.option("max_steps"), n_starts=point["starts"])
+    result = _solve_ik(prob._replace(target=target), point["v0"], wrench0, kernel.option("plan"), **options)[0]
+    return {str(i): leaf for i, leaf in enumerate(jax.tree.leaves(result))}
+
+
+def _from_outputs(out: dict, run, prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
+    """The IKResult of a batch from the engine's flat outputs."""
+    one = jax.tree.map(lambda a: a[0], prob.target)
+    shape = jax.eval_shape(lambda: run(prob._replace(target=one), v0[0], wrench0, plan)[0])
+    return jax.tree.unflatten(jax.tree.structure(shape), [jnp.asarray(out[str(i)]) for i in range(len(out))])
 
 
 def track(robot: Robot, targets: Target, **options) -> IKResult:
@@ -759,7 +801,7 @@ def track(robot: Robot, targets: Target, **options) -> IKResult:
 def _track(prob, targets, v0, wrench0, plan, tol, max_steps):
     def step(carry, target):
         v, wrench = carry
-        result, wrench_new = _solve_ik(prob._replace(target=target), v, wrench, plan, tol, max_steps)
+        result, wrench_new = _solve_ik(prob._replace(target=target), v, wrench, plan, tol=tol, max_steps=max_steps)
         ok = result.result == status.SUCCESS
         v_new = scaled_inputs(result.actuation, prob, plan)
         return (jnp.where(ok, v_new, v), jnp.where(ok, wrench_new, wrench)), result

@@ -34,7 +34,7 @@ def _tube_mask(s, insertion):
     return np.asarray(s) <= insertion + 1e-12 if insertion > 0 else np.zeros(np.shape(s), bool)
 
 
-def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, title: str | None = None):
+def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, title: str | None = None, target=None):
     """Side view (world z-y plane) and 3D view of one solved shape; the tube part drawn thick.
 
     Args:
@@ -42,6 +42,7 @@ def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, 
         insertion: tube insertion depth d [m], to mark the backbone segment [0, d].
         path: where to save a PNG; the figure is returned either way.
         title: figure title.
+        target: a target tip position [m], (3,), marked with a cross (inverse kinematics).
     """
     plt = _pyplot()
     p = np.asarray(sol.position) * 1e3
@@ -52,6 +53,9 @@ def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, 
     if tube.any():
         ax.plot(p[tube, 2], p[tube, 1], color="black", lw=4, label=f"with Nitinol tube (d = {insertion * 1e3:.0f} mm)")
     ax.plot(*p[-1, [2, 1]], "o", color="tab:red", label="tip")
+    if target is not None:
+        q = np.asarray(target) * 1e3
+        ax.plot(q[2], q[1], "x", color="tab:green", ms=10, mew=2, label="target")
     ax.axhline(0, color="0.8", lw=0.8, zorder=0)
     ax.set_xlabel("z [mm]")
     ax.set_ylabel("y [mm]")
@@ -64,7 +68,9 @@ def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, 
     if tube.any():
         ax3.plot(p[tube, 0], p[tube, 2], p[tube, 1], color="black", lw=4)
     ax3.scatter(*p[-1, [0, 2, 1]], color="tab:red")
-    _equal_3d(ax3, p)
+    if target is not None:
+        ax3.scatter(*q[[0, 2, 1]], color="tab:green", marker="x", s=80)
+    _equal_3d(ax3, p if target is None else np.vstack([p, q]))
     ax3.set_title("3D (gravity along -y)")
     if title:
         fig.suptitle(title)
