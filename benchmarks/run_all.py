@@ -28,6 +28,7 @@ SCRIPTS = (
     ("peer_pyelastica.py", {}),  # writes nothing without the peer extra
     ("sweep_throughput.py", {}),
     ("sweep_throughput.py", {"JAX_NUM_CPU_DEVICES": "2"}),  # both cores on one sweep
+    ("durable_sweep.py", {}),
     ("gpu_throughput.py", {}),  # writes nothing where JAX sees no GPU
 )
 """(script, extra environment) in the order they run."""

@@ -2,6 +2,8 @@
 
 import jax
 
+__version__ = "0.1.0"
+
 jax.config.update("jax_enable_x64", True)
 
 from . import status as status  # noqa: E402
@@ -49,5 +51,3 @@ from .solve import tip_angle as tip_angle  # noqa: E402
 from .status import ConvergenceError as ConvergenceError  # noqa: E402
 from .sweep import sweep as sweep  # noqa: E402
 from .sweep import sweep_chunks as sweep_chunks  # noqa: E402
-
-__version__ = "0.1.0"

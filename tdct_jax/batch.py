@@ -5,7 +5,7 @@ optimal insertions bring their own per-point kernels."""
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Collection, Iterator
 
 import jax
 import numpy as np
@@ -71,8 +71,25 @@ def lanes_per_call(n: int, chunk_size: int, n_devices: int = 1) -> int:
     return -(-chunk // n_devices) * n_devices
 
 
+def chunk_lanes(kernel: Kernel, n: int, chunk_size=None) -> int:
+    """Configurations per compiled call when ``iter_batched`` runs ``kernel`` over n points: its
+    chunk i holds points [i * lanes, (i + 1) * lanes). ``chunk_size`` None: ``default_chunk_size``."""
+    if chunk_size is None:
+        chunk_size = default_chunk_size(kernel.mesh)
+    check_integer("chunk_size", chunk_size)
+    return lanes_per_call(n, chunk_size, 1 if kernel.mesh is None else kernel.mesh.size)
+
+
 def iter_batched(
-    kernel: Kernel, base, points: dict, *, chunk_size=None, progress=True, desc="solving", per_point=1
+    kernel: Kernel,
+    base,
+    points: dict,
+    *,
+    chunk_size=None,
+    progress=True,
+    desc="solving",
+    per_point=1,
+    skip: Collection[int] = (),
 ) -> Iterator[tuple[int, dict]]:
     """Runs ``kernel`` over the leading axis of ``points`` in chunks, yielding each chunk's
     (first row, numpy outputs) as soon as it is computed, with the next chunk already dispatched.
@@ -80,13 +97,11 @@ def iter_batched(
     Every chunk has the same static shape (the last is padded by repeating its final point), so
     one compile serves the whole batch and any later one with the same chunk size.
     ``chunk_size`` None takes ``default_chunk_size`` for the kernel's devices. ``per_point`` is
-    the number of solves each point stands for (the progress bar counts solves).
+    the number of solves each point stands for (the progress bar counts solves). ``skip``: indices
+    of chunks (see ``chunk_lanes``) not to compute, done before; the progress bar starts at them.
     """
-    if chunk_size is None:
-        chunk_size = default_chunk_size(kernel.mesh)
-    check_integer("chunk_size", chunk_size)
     n = len(next(iter(points.values())))
-    chunk = lanes_per_call(n, chunk_size, 1 if kernel.mesh is None else kernel.mesh.size)
+    chunk = chunk_lanes(kernel, n, chunk_size)
     # one device: commit the points to it, so jit runs there and not on the default device
     device = kernel.mesh.devices.flat[0] if kernel.mesh is not None and kernel.mesh.size == 1 else None
 
@@ -97,10 +112,14 @@ def iter_batched(
         bar.set_postfix_str("")
         return start, out
 
-    with tqdm(total=n * per_point, unit="solve", desc=desc, disable=not progress, dynamic_ncols=True) as bar:
+    starts = [start for start in range(0, n, chunk) if start // chunk not in skip]
+    done = n - sum(min(chunk, n - start) for start in starts)
+    with tqdm(
+        total=n * per_point, initial=done * per_point, unit="solve", desc=desc, disable=not progress, dynamic_ncols=True
+    ) as bar:
         bar.set_postfix_str("compiling")
         pending = None
-        for start in range(0, n, chunk):
+        for start in starts:
             index = np.minimum(np.arange(start, start + chunk), n - 1)
             chunk_points = {k: v[index] for k, v in points.items()}
             if device is not None:
@@ -109,7 +128,8 @@ def iter_batched(
             if pending is not None:
                 yield fetched(*pending)
             pending = start, out
-        yield fetched(*pending)
+        if pending is not None:
+            yield fetched(*pending)
 
 
 def run_batched(kernel: Kernel, base, points: dict, **options) -> dict:

@@ -28,6 +28,8 @@ from .status import ConvergenceError
 
 COMPILE_CACHE_ENV = "TDCT_COMPILE_CACHE"
 """Environment variable: a folder for the CLI's compilation cache, or 0 / off for none."""
+SLURM_TASKS = "SLURM_STEP_NUM_TASKS"
+"""Set by srun to the number of tasks (processes) of the job step: ``tdct sweep`` runs distributed above one."""
 ON_CPU = ("solve", "compliance", "synth", "calibrate", "ik")
 """Verbs that run on the CPU even where an accelerator is the default: single solves and small
 batches are faster there (each small operation on a GPU is a kernel launch)."""
@@ -258,6 +260,23 @@ def _parser() -> argparse.ArgumentParser:
     k.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     k.add_argument("--plot", metavar="fit.png", help="save model over measured shapes (side view and 3D)")
     k.add_argument("--quiet", action="store_true", help="no progress bar")
+    w = verbs.add_parser(
+        "sweep", parents=[cached], help="solve a grid or batch from a TOML spec into an .npz; a rerun resumes where it stopped"
+    )
+    w.add_argument("spec", metavar="SPEC.toml", help="what to solve, SI units (format: tdct_jax.spec)")
+    w.add_argument(
+        "--out",
+        required=True,
+        metavar="FILE.npz",
+        help="the results (tdct.gather reads them); work in progress in <stem>.partial/",
+    )
+    w.add_argument("--overwrite", action="store_true", help="discard a partial folder left by a different sweep")
+    w.add_argument("--quiet", action="store_true", help="no progress bar")
+    w.add_argument(
+        "--distributed",
+        action="store_true",
+        help=f"call jax.distributed.initialize() and write one part per process (automatic when {SLURM_TASKS} > 1, under srun)",
+    )
     return parser
 
 
@@ -532,6 +551,18 @@ def _ik_command(args) -> int:
     return 0
 
 
+def _sweep_command(args) -> int:
+    from .spec import read_spec
+    from .sweep import sweep
+
+    check_output("--out", args.out)
+    spec = read_spec(args.spec)
+    if args.distributed or int(os.environ.get(SLURM_TASKS, "1")) > 1:
+        jax.distributed.initialize()
+    print(sweep(**spec, out=args.out, overwrite=args.overwrite, progress=not args.quiet))
+    return 0
+
+
 COMMANDS = {
     "solve": _solve_command,
     "compliance": _compliance_command,
@@ -539,6 +570,7 @@ COMMANDS = {
     "synth": _synth_command,
     "calibrate": _calibrate_command,
     "ik": _ik_command,
+    "sweep": _sweep_command,
 }
 
 

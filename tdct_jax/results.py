@@ -1,23 +1,19 @@
 """Results over many points (sweeps, load capacities, optimal insertions): their types, .npz and
-.csv files, streaming a sweep to disk chunk by chunk, and joining the parts of a multi-process sweep."""
+.csv files, and reading back a sweep's file or joining the parts of a multi-process sweep."""
 
 from __future__ import annotations
 
 import csv
 import dataclasses
 import math
-import os
 import re
-import tempfile
-import zipfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 
-import jax
 import numpy as np
-from numpy.lib.format import open_memmap
 
 from . import status
+from .checkpoint import partial_path, progress
 from .solve import tip_angle
 
 UNITS = {
@@ -194,50 +190,6 @@ def part_path(path, k: int, n: int) -> Path:
     return path.with_name(f"{path.stem}.part{k}-of-{n}{path.suffix}")
 
 
-def stream_npz(path, shape: tuple, axes: dict | None, inputs: dict, lead: int, chunks: Iterator[SweepChunk]) -> Path:
-    """Writes each chunk into .npy files (memory-mapped) beside ``path`` as it comes, then stores
-    them in one uncompressed .npz: the whole sweep, or after ``jax.distributed.initialize`` this
-    process's part (flat, with ``points`` = [start, stop)). ``inputs`` are this process's rows,
-    with ``lead`` leading axes per row."""
-    path, k, n_proc = Path(path), jax.process_index(), jax.process_count()
-    whole = n_proc == 1
-    if not whole:
-        path = part_path(path, k, n_proc)
-    n = len(next(iter(inputs.values()))) * (shape[-1] if lead == 2 else 1)
-    flat = shape if whole else (n,)
-    with tempfile.TemporaryDirectory(dir=path.parent, prefix=f".{path.name}.") as tmp:
-        files = []
-
-        def save(name, array):
-            files.append(Path(tmp) / f"{name}.npy")
-            np.save(files[-1], array)
-
-        save("shape", np.asarray(shape))
-        for name, v in (axes or {}).items():
-            save(f"axis_{name}", v)
-        for name, v in inputs.items():
-            save(f"input_{name}", v.reshape(flat + v.shape[lead:]))
-        outputs, first = {}, None
-        for c in chunks:
-            first = c.start if first is None else first
-            derived = dict(tip_angle=np.asarray(tip_angle(c.outputs["tip_rotation"])), converged=c.outputs["result"] == 0)
-            for name, v in dict(c.outputs, **derived).items():
-                if name not in outputs:
-                    files.append(Path(tmp) / f"{name}.npy")
-                    outputs[name] = open_memmap(files[-1], mode="w+", dtype=v.dtype, shape=flat + v.shape[1:])
-                outputs[name].reshape(-1, *v.shape[1:])[c.start - first : c.stop - first] = v
-        for v in outputs.values():
-            v.flush()
-        if not whole:
-            save("points", np.asarray([first, first + n]))
-        partial = Path(tmp) / "sweep.npz"
-        with zipfile.ZipFile(partial, "w", zipfile.ZIP_STORED) as archive:
-            for f in files:
-                archive.write(f, f.name)
-        os.replace(partial, path)
-    return path
-
-
 def sweep_result(arrays: Mapping) -> SweepResult:
     """A SweepResult from arrays named as in a sweep's .npz file."""
     fields = {f.name for f in dataclasses.fields(SweepResult)} - {"shape", "axes", "inputs", "seconds"}
@@ -258,8 +210,9 @@ def gather(path) -> SweepResult:
         SweepResult equal to the one a single-process sweep returns (``seconds`` NaN).
 
     Raises:
-        ValueError: when neither the file nor its parts are there, or parts are missing, from
-            different sweeps or from sweeps over different process counts.
+        ValueError: when the file is not there (naming every missing or unfinished part, and
+            how far each partial folder got), or its parts come from different sweeps or from
+            sweeps over different process counts.
     """
     path = Path(path)
     if path.exists():
@@ -270,16 +223,35 @@ def gather(path) -> SweepResult:
                 f"{path} holds one part of a sweep (points {arrays['points'].tolist()}); gather the path given as out="
             )
         return sweep_result(arrays)
-    pattern = re.compile(rf"{re.escape(path.stem)}\.part(\d+)-of-(\d+){re.escape(path.suffix)}")
-    found = {tuple(map(int, m.groups())): f for f in path.parent.glob(f"{path.stem}.part*") if (m := pattern.fullmatch(f.name))}
-    counts = sorted({n for _, n in found})
-    if len(counts) != 1:
-        problem = "nor any part" if not counts else f"and its parts come from sweeps over {counts} processes"
-        raise ValueError(f"{path}: no such file, {problem} (<stem>.partK-of-N{path.suffix})")
+    pattern = re.compile(rf"{re.escape(path.stem)}\.part(\d+)-of-(\d+)({re.escape(path.suffix)}|\.partial)")
+    found, partial = {}, {}
+    for f in path.parent.glob(f"{path.stem}.part*"):
+        if m := pattern.fullmatch(f.name):
+            (partial if m.group(3) == ".partial" else found)[int(m.group(1)), int(m.group(2))] = f
+    counts = sorted({n for _, n in found | partial})
+    if not counts:
+        single = progress(partial_path(path))
+        if single is None:
+            raise ValueError(f"{path}: no such file, nor any part (<stem>.partK-of-N{path.suffix})")
+        raise ValueError(
+            f"{path}: not finished: its partial folder {partial_path(path).name} holds {single[0]} of {single[1]} chunks; "
+            "rerun the same sweep to finish it"
+        )
+    if len(counts) > 1:
+        raise ValueError(f"{path}: no such file, and its parts come from sweeps over {counts} processes")
     n_proc = counts[0]
-    missing = sorted(set(range(n_proc)) - {k for k, _ in found})
-    if missing:
-        raise ValueError(f"{path}: part(s) {missing} of {n_proc} are missing")
+    unfinished = []
+    for k in range(n_proc):
+        if (k, n_proc) in found:
+            continue
+        done = progress(partial[k, n_proc]) if (k, n_proc) in partial else None
+        where = "no file, no partial folder" if done is None else f"{partial[k, n_proc].name}: {done[0]} of {done[1]} chunks"
+        unfinished.append(f"part {k} ({where})")
+    if unfinished:
+        raise ValueError(
+            f"{path}: {len(unfinished)} of {n_proc} parts are missing or unfinished: {', '.join(unfinished)}; "
+            f"rerun the same sweep over {n_proc} processes to finish them"
+        )
     parts = []
     for k in range(n_proc):
         with np.load(found[k, n_proc]) as data:

@@ -13,7 +13,8 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Collection, Iterator, Mapping
+from pathlib import Path
 from time import perf_counter
 from typing import NamedTuple
 
@@ -22,15 +23,16 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from . import status
-from .batch import Kernel, iter_batched, joined, mesh_for
+from . import __version__, status
+from .batch import Kernel, chunk_lanes, iter_batched, joined, mesh_for
+from .checkpoint import Partial, digest
 from .checks import as_array, check_range
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .mechanics import compliance_and_solution
 from .options import DEFAULT_SOLVER, SolverOptions
-from .results import SweepChunk, SweepResult, stream_npz
+from .results import SweepChunk, SweepResult, part_path
 from .robot import SCALAR_FIELDS, Robot
-from .solve import check_inputs, solve
+from .solve import check_inputs, solve, tip_angle
 
 
 def _point_shape(name: str, robot: Robot) -> tuple[int, ...]:
@@ -191,11 +193,16 @@ def _plan(robot, act, load, grid, batch, warm_start, shapes, compliance, devices
     return _Plan(kernel, base, mine, shape, axes, 1 + warm_start, first)
 
 
-def _chunks(plan: _Plan, chunk_size, progress) -> Iterator[SweepChunk]:
-    per_row = plan.shape[-1] if plan.lead == 2 else 1
+def _per_row(plan: _Plan) -> int:
+    """Points per row of the plan: one, or a warm-started path's length."""
+    return plan.shape[-1] if plan.lead == 2 else 1
+
+
+def _chunks(plan: _Plan, chunk_size, progress, skip: Collection[int] = ()) -> Iterator[SweepChunk]:
+    per_row = _per_row(plan)
     k, n_proc = jax.process_index(), jax.process_count()
     desc = "solving" if n_proc == 1 else f"solving (process {k + 1} of {n_proc})"
-    options = dict(chunk_size=chunk_size, progress=progress, desc=desc, per_point=per_row)
+    options = dict(chunk_size=chunk_size, progress=progress, desc=desc, per_point=per_row, skip=skip)
     for row, out in iter_batched(plan.kernel, plan.base, plan.points, **options):
         outputs = {name: v.reshape(-1, *v.shape[plan.lead :]) for name, v in out.items()}
         rows = slice(row, row + len(next(iter(out.values()))))
@@ -214,7 +221,7 @@ class _Failures:
     def watch(self, chunks: Iterator[SweepChunk]) -> Iterator[SweepChunk]:
         for c in chunks:
             failed = int(np.count_nonzero(c.outputs["result"] != status.SUCCESS))
-            if failed and self.first is None:
+            if failed and (self.first is None or c.start < self.first.start):
                 self.first = c
             self.count += failed
             yield c
@@ -239,27 +246,95 @@ class _Failures:
         )
 
 
+def _fingerprint(plan: _Plan, lanes: int) -> dict:
+    """Everything that determines the file a sweep (or this process's part of it) writes, named
+    as a reader knows it, for ``checkpoint.Partial``'s resume check."""
+    robot, act, load, gravity, solver = plan.base
+
+    def plain(v):
+        return v if isinstance(v, str) else np.asarray(v).tolist()
+
+    kind, columns = ("grid axis", plan.axes) if plan.axes is not None else ("batch column", plan.points)
+    devices = plan.kernel.mesh.devices.flat
+    return {
+        "tdct_jax": __version__,
+        "jax": jax.__version__,
+        **{f"robot.{f.name}": plain(getattr(robot, f.name)) for f in dataclasses.fields(robot)},
+        "act.tensions": plain(act.tensions),
+        "act.insertion": plain(act.insertion),
+        "load.force": plain(load.force),
+        "load.moment": plain(load.moment),
+        "gravity": plain(gravity),
+        **{f"solver.{f.name}": plain(getattr(solver, f.name)) for f in dataclasses.fields(solver)},
+        f"{kind}s": list(columns),
+        **{f"{kind} {name}": digest(v) for name, v in columns.items()},
+        "warm_start": plan.lead == 2,
+        **{name: plain(value) for name, value in plan.kernel.options},
+        "chunk_size": lanes,
+        "devices": f"{len(devices)} {devices[0].platform}",
+        "process": f"{jax.process_index()} of {jax.process_count()}",
+    }
+
+
+FAILURE_FIELDS = ("result", "iterations", "stages", "residual_norm")
+"""The outputs ``throw`` reads of chunks an earlier run finished."""
+_SWEEP_ONLY = ("out", "overwrite", "throw")
+"""``sweep``'s arguments that ``sweep_chunks`` does not take."""
+
+
+def _write(plan: _Plan, out, chunk_size, progress, overwrite: bool, failures: _Failures) -> Path:
+    """Streams this process's chunks into the partial folder beside ``out``, each durable before
+    the next counts (a rerun of the same sweep computes only the chunks not yet there), then
+    assembles the .npz: the whole sweep, or after ``jax.distributed.initialize`` this process's
+    part (flat, with ``points`` = [start, stop))."""
+    whole = jax.process_count() == 1
+    path = Path(out) if whole else part_path(out, jax.process_index(), jax.process_count())
+    rows, per_row = len(next(iter(plan.points.values()))), _per_row(plan)
+    lanes = chunk_lanes(plan.kernel, rows, chunk_size)
+    store = Partial.open(path, _fingerprint(plan, lanes), -(-rows // lanes), overwrite=overwrite)
+
+    def index(c: SweepChunk) -> int:
+        return (c.start // per_row - plan.first) // lanes
+
+    def finished(i: int) -> SweepChunk:
+        outputs, start = store.read(i, FAILURE_FIELDS), (plan.first + i * lanes) * per_row
+        return SweepChunk(start, start + len(outputs["result"]), plan.shape, {}, outputs)
+
+    for _ in failures.watch(finished(i) for i in sorted(store.done)):
+        pass
+    for c in failures.watch(_chunks(plan, chunk_size, progress, skip=store.done)):
+        derived = dict(
+            tip_angle=np.asarray(tip_angle(c.outputs["tip_rotation"])), converged=c.outputs["result"] == status.SUCCESS
+        )
+        store.save(index(c), c.outputs | derived)
+    flat = plan.shape if whole else (rows * per_row,)
+    head = {"shape": np.asarray(plan.shape)} | {f"axis_{name}": v for name, v in (plan.axes or {}).items()}
+    head |= {f"input_{name}": v.reshape(flat + v.shape[plan.lead :]) for name, v in plan.points.items()}
+    tail = {} if whole else {"points": np.asarray([plan.first * per_row, (plan.first + rows) * per_row])}
+    return store.finish(path, head, flat, tail)
+
+
 def sweep_chunks(robot=None, act=None, load=None, **options) -> Iterator[SweepChunk]:
     """``sweep``'s results chunk by chunk, each yielded as soon as it is computed, so that host
     memory holds one chunk's outputs. After ``jax.distributed.initialize`` each process gets the
     chunks of its own part of the points. Failed points stay as result codes (no ``throw``).
 
     Args:
-        robot, act, load, **options: as for ``sweep``, with the same defaults (``out`` and
-            ``throw`` excepted). Bad input raises here, before the first chunk.
+        robot, act, load, **options: as for ``sweep``, with the same defaults (``out``,
+            ``overwrite`` and ``throw`` excepted). Bad input raises here, before the first chunk.
 
     Returns:
         An iterator of SweepChunk, in order of ``start``.
     """
-    for name in ("out", "throw"):
+    for name in _SWEEP_ONLY:
         if name in options:
             raise TypeError(f"sweep_chunks takes no {name}= (it yields every chunk, failed points included); use sweep")
     defaults = {k: p.default for k, p in inspect.signature(sweep).parameters.items() if p.kind is p.KEYWORD_ONLY}
     unknown = sorted(set(options) - set(defaults))
     if unknown:
-        raise TypeError(f"sweep_chunks: unknown argument(s) {unknown}; allowed: {sorted(set(defaults) - {'out', 'throw'})}")
+        raise TypeError(f"sweep_chunks: unknown argument(s) {unknown}; allowed: {sorted(set(defaults) - set(_SWEEP_ONLY))}")
     o = defaults | options
-    plan = _plan(robot, act, load, **{k: v for k, v in o.items() if k not in ("chunk_size", "progress", "out", "throw")})
+    plan = _plan(robot, act, load, **{k: v for k, v in o.items() if k not in ("chunk_size", "progress", *_SWEEP_ONLY)})
     return _chunks(plan, o["chunk_size"], o["progress"])
 
 
@@ -277,6 +352,7 @@ def sweep(
     progress: bool = True,
     devices=None,
     out=None,
+    overwrite: bool = False,
     gravity=STANDARD_GRAVITY,
     solver: SolverOptions = DEFAULT_SOLVER,
     throw: bool = True,
@@ -300,10 +376,16 @@ def sweep(
         progress: show a progress bar on the terminal.
         devices: devices to shard each chunk over (default: this process's, ``jax.local_devices()``).
         out: an .npz path to stream the results to, chunk by chunk, with host memory bounded by
-            a chunk (uncompressed; same arrays as ``SweepResult.save_npz``). After
-            ``jax.distributed.initialize`` each process solves and writes its own contiguous part
-            of the points, to ``<stem>.partK-of-N.npz``; ``out`` is then required.
-            ``tdct.gather(out)`` reads the result back either way.
+            a chunk (uncompressed; same arrays as ``SweepResult.save_npz``). Each finished chunk
+            is kept on disk in the folder ``<stem>.partial`` beside it, so that the same call
+            after any stop computes only the chunks not yet there (it says so on stderr); the
+            folder goes once the file is written, equal byte for byte to an uninterrupted run's.
+            After ``jax.distributed.initialize`` each process solves and writes its own
+            contiguous part of the points, to ``<stem>.partK-of-N.npz`` (and resumes from
+            ``<stem>.partK-of-N.partial``); ``out`` is then required. ``tdct.gather(out)`` reads
+            the result back either way.
+        overwrite: discard a partial folder left by a different sweep (other inputs, robot,
+            solver options, chunk size, devices or package version) instead of refusing it.
         gravity: world gravity [m/s^2] (None: none).
         solver: SolverOptions for every solve.
         throw: after the sweep (and after writing ``out``), raise ConvergenceError naming the
@@ -312,6 +394,10 @@ def sweep(
 
     Returns:
         SweepResult, or with ``out`` the path written.
+
+    Raises:
+        ValueError: bad input, or a partial folder of a different sweep (naming what differs).
+        ConvergenceError: with ``throw``, when a point failed.
     """
     if out is None and jax.process_count() > 1:
         raise ValueError(
@@ -321,12 +407,11 @@ def sweep(
     plan = _plan(robot, act, load, grid, batch, warm_start, shapes, compliance, devices, gravity, solver)
     start = perf_counter()
     failures = _Failures()
-    chunks = failures.watch(_chunks(plan, chunk_size, progress))
     if out is not None:
-        path = stream_npz(out, plan.shape, plan.axes, plan.points, plan.lead, chunks)
+        path = _write(plan, out, chunk_size, progress, overwrite, failures)
         failures.check(solver, throw)
         return path
-    outputs = unflatten(joined([c.outputs for c in chunks]), plan.shape)
+    outputs = unflatten(joined([c.outputs for c in failures.watch(_chunks(plan, chunk_size, progress))]), plan.shape)
     inputs = unflatten(plan.points, plan.shape, plan.lead)
     result = SweepResult(shape=plan.shape, axes=plan.axes, inputs=inputs, seconds=perf_counter() - start, **outputs)
     failures.check(solver, throw)

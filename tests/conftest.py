@@ -1,4 +1,8 @@
 import os
+import signal
+import subprocess
+import sys
+import threading
 
 import jax
 import numpy as np
@@ -30,3 +34,55 @@ def paper_case(robot):
     act = tdct.Actuation(tensions=(6.0, 0.0, 0.0, 0.0), insertion=0.08)
     load = tdct.TipLoad.from_mass(0.020)
     return robot, act, load, tdct.solve(robot, act, load, throw=True)
+
+
+STOPPING_CLI = """
+import importlib, sys, time
+from tdct_jax.cli import main
+
+sweep_module = importlib.import_module("tdct_jax.sweep")
+
+stop, real, computed = int(sys.argv[1]), sweep_module.iter_batched, []
+
+def stopping(*args, **kwargs):
+    for i, chunk in enumerate(real(*args, **kwargs)):
+        if i == stop:
+            print("stalled", flush=True)
+            time.sleep(600)
+        computed.append(chunk[0])
+        yield chunk
+
+sweep_module.iter_batched = stopping
+code = main(sys.argv[2:])
+print("computed", len(computed))
+sys.exit(code)
+"""
+"""``python -c STOPPING_CLI STOP ARGS...`` runs ``tdct ARGS...``; its sweep stalls for good once STOP
+chunks are durable (printing "stalled"), or with STOP -1 runs to the end and prints "computed N",
+the chunks it computed."""
+
+
+def start_cli(stop: int, *args, env=None) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-c", STOPPING_CLI, str(stop), *map(str, args)],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def kill_when_stalled(*runs: subprocess.Popen, timeout_s: float = 300) -> None:
+    """Waits until each run has stalled (killing them all after ``timeout_s``), then kills them with SIGKILL."""
+    timer = threading.Timer(timeout_s, lambda: [run.kill() for run in runs])
+    timer.start()
+    try:
+        for run in runs:
+            line = run.stdout.readline()
+            assert line.strip() == "stalled", run.stderr.read()[-3000:]
+    finally:
+        timer.cancel()
+        for run in runs:
+            run.send_signal(signal.SIGKILL)
+            run.communicate()
+    assert all(run.returncode == -signal.SIGKILL for run in runs)

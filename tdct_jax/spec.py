@@ -1,0 +1,170 @@
+"""Sweep specs: a TOML file that says what ``tdct sweep`` solves, read into ``tdct.sweep``'s arguments.
+
+A spec, SI units throughout (every key but one table of points is optional)::
+
+    robot = "robot.toml"      # a file of Robot fields beside the spec, or a [robot] table; default Table II
+    gravity = true            # true (standard, -y), false, or [gx, gy, gz] in m/s^2
+    chunk_size = 64           # configurations per compiled call (default: the platform's)
+    shapes = false            # also keep every shape / the 3x3 tip compliance
+    compliance = false
+    warm_start = false        # grid only: solve along the last axis in order
+
+    [base]                    # what every point shares: tensions [N], insertion [m], force [N], moment [N m]
+    tensions = [0.0, 0.0, 0.0, 2.0]
+
+    [solver]                  # SolverOptions fields: steps, transition, tendon_model, tol, max_iter
+    steps = 16
+
+    [grid]                    # or [batch], columns zipped point by point; names as in tdct.sweep
+    insertion = {linspace = [0.0, 0.16, 17]}                 # first, last, count
+    tensions = {linspace = [0.0, 10.0, 11], tendons = [1]}   # tendon 1 swept, the others as in [base]
+    tip_mass = [0.0, 0.02, 0.05]                             # explicit values; vectors as lists of lists
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from .checks import check_integer
+from .loads import STANDARD_GRAVITY, Actuation, TipLoad
+from .options import SolverOptions
+from .robot import Robot
+
+OPTIONS = ("chunk_size", "shapes", "compliance", "warm_start", "gravity")
+TABLES = ("robot", "base", "solver", "grid", "batch")
+BASE = ("tensions", "insertion", "force", "moment")
+PICKS = {"tensions": "tendons", "force": "components", "moment": "components"}
+"""Vector inputs a linspace can sweep part of: the key that names the entries it sets."""
+COMPONENTS = ("x", "y", "z")
+
+
+def read_spec(path) -> dict:
+    """Reads a sweep spec (see the module docstring).
+
+    Returns:
+        ``tdct.sweep``'s keyword arguments: robot, act, load, grid or batch, gravity, solver and
+        the options the spec sets.
+
+    Raises:
+        ValueError: the file cannot be read, or a key is unknown or has a bad value (the message
+            names the file, the key, the value and what is allowed).
+    """
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        raise ValueError(f"cannot read sweep spec {path}: {e}") from None
+    try:
+        return _arguments(data, path.parent)
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
+
+
+def _known(where: str, table: dict, allowed) -> None:
+    unknown = sorted(set(table) - set(allowed))
+    if unknown:
+        raise ValueError(f"{where}unknown key(s) {unknown}; allowed: {list(allowed)}")
+
+
+def _table(data: dict, name: str) -> dict:
+    table = data.get(name, {})
+    if not isinstance(table, dict):
+        raise ValueError(f"{name} = {table!r} must be a table ([{name}])")
+    return table
+
+
+def _built(where: str, build, **fields):
+    """``build(**fields)``, its bad-value errors prefixed with the table they come from."""
+    try:
+        return build(**fields)
+    except ValueError as e:
+        raise ValueError(f"[{where}] {e}") from None
+
+
+def _arguments(data: dict, folder: Path) -> dict:
+    _known("", data, OPTIONS + TABLES)
+    robot = data.get("robot", {})
+    if isinstance(robot, str):
+        robot = Robot.from_toml(folder / robot)
+    elif isinstance(robot, dict):
+        _known("[robot] ", robot, [f.name for f in dataclasses.fields(Robot)])
+        robot = _built("robot", Robot, **robot)
+    else:
+        raise ValueError(f'robot = {robot!r} must be a file of Robot fields (robot = "robot.toml") or a [robot] table')
+    base = _table(data, "base")
+    _known("[base] ", base, BASE)
+    act = _built(
+        "base", Actuation, tensions=base.get("tensions", np.zeros(robot.n_tendons)), insertion=base.get("insertion", 0.0)
+    )
+    load = _built("base", TipLoad, force=base.get("force", (0.0, 0.0, 0.0)), moment=base.get("moment", (0.0, 0.0, 0.0)))
+    solver = _table(data, "solver")
+    _known("[solver] ", solver, [f.name for f in dataclasses.fields(SolverOptions)])
+    args = dict(robot=robot, act=act, load=load, solver=_built("solver", SolverOptions, **solver))
+    tables = [name for name in ("grid", "batch") if name in data]
+    if len(tables) != 1:
+        found = "both" if tables else "neither"
+        raise ValueError(
+            f"give one table of points, [grid] (a product of axes) or [batch] (columns zipped point by point): found {found}"
+        )
+    kind = tables[0]
+    columns = _table(data, kind)
+    if not columns:
+        raise ValueError(f"[{kind}] is empty: give at least one input name = values")
+    defaults = dict(tensions=act.tensions, force=load.force, moment=load.moment)
+    args[kind] = {name: _values(f"{kind}.{name}", v, defaults.get(name)) for name, v in columns.items()}
+    for name in ("shapes", "compliance", "warm_start"):
+        if name in data:
+            if not isinstance(data[name], bool):
+                raise ValueError(f"{name} = {data[name]!r} must be true or false")
+            args[name] = data[name]
+    if "chunk_size" in data:
+        args["chunk_size"] = check_integer("chunk_size", data["chunk_size"])
+    args["gravity"] = _gravity(data.get("gravity", True))
+    return args
+
+
+def _gravity(value):
+    if value is True:
+        return STANDARD_GRAVITY
+    if value is False:
+        return None
+    if isinstance(value, list) and len(value) == 3 and all(_is_number(g) for g in value):
+        return tuple(float(g) for g in value)
+    raise ValueError(f"gravity = {value!r} must be true (standard, -y), false (none) or [gx, gy, gz] in m/s^2")
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool)
+
+
+def _values(key: str, value, base) -> np.ndarray:
+    """One axis or column: explicit values, or {linspace = [first, last, count]} (setting only the
+    named entries of a vector input, the rest as in the base configuration)."""
+    if isinstance(value, list):
+        try:
+            return np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"{key} = {value!r} must be numbers (vectors as lists of lists of equal length)") from None
+    if not isinstance(value, dict) or "linspace" not in value:
+        raise ValueError(f"{key} = {value!r} must be a list of values or a table {{linspace = [first, last, count]}}")
+    name = key.split(".", 1)[1]
+    pick = PICKS.get(name)
+    _known(f"{key}: ", value, ("linspace", pick) if pick else ("linspace",))
+    spaced = value["linspace"]
+    if not (isinstance(spaced, list) and len(spaced) == 3 and all(_is_number(x) for x in spaced[:2])):
+        raise ValueError(f"{key}.linspace = {spaced!r} must be [first, last, count]")
+    values = np.linspace(float(spaced[0]), float(spaced[1]), check_integer(f"{key}.linspace count", spaced[2]))
+    if pick is None:
+        return values
+    base = np.asarray(base, dtype=np.float64)
+    names = COMPONENTS if pick == "components" else tuple(range(1, len(base) + 1))
+    chosen = value.get(pick)
+    if not (isinstance(chosen, list) and chosen and all(c in names and not isinstance(c, bool) for c in chosen)):
+        raise ValueError(f"{key}.{pick} = {chosen!r} must list the entries the linspace sets, from {list(names)}")
+    vectors = np.tile(base, (len(values), 1))
+    vectors[:, [names.index(c) for c in chosen]] = values[:, None]
+    return vectors
