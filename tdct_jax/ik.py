@@ -35,7 +35,7 @@ import numpy as np
 from jax import lax
 
 from . import status
-from .batch import Kernel, run_batched
+from .batch import Kernel, default_chunk_size, lanes_per_call, run_batched
 from .checks import as_array, check_choice, check_integer, check_range, is_concrete
 from .linalg import solve_spd
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
@@ -60,10 +60,10 @@ class Target:
     """A tip pose to reach, world frame.
 
     Attributes:
-        position: tip position [m], (3,).
+        position: tip position [m], (3,); a leading batch axis (n, 3) holds n targets.
         direction: unit tip tangent to reach, (3,) (normalised here), or None.
         tip_angle: in-plane tip angle theta_tip [rad] (z-y plane, from +z toward +y), or None;
-            at most one of direction and tip_angle.
+            at most one of direction and tip_angle. Batched like the position.
         position_weight: weight of the position error (per robot length), > 0.
         orientation_weight: weight of the orientation error (per radian), >= 0.
         axes: the position components that count (static), e.g. "yz" for a target in the z-y
@@ -85,16 +85,16 @@ class Target:
             or len(set(self.axes)) != len(self.axes)
         ):
             raise ValueError(f"axes = {self.axes!r} must name position components once each, from 'xyz'")
-        position = as_array("position", self.position, (3,), unit=" m")
+        position = as_array("position", self.position, trailing=(3,), unit=" m")
         direction = self.direction
         if direction is not None:
-            direction = as_array("direction", direction, (3,))
+            direction = as_array("direction", direction, trailing=(3,))
             if is_concrete(direction):
-                norm = float(np.linalg.norm(direction))
-                if norm == 0.0:
+                norm = np.linalg.norm(direction, axis=-1, keepdims=True)
+                if np.any(norm == 0.0):
                     raise ValueError("direction = [0, 0, 0]: a tip direction must be a nonzero vector")
                 direction = direction / norm
-        tip = as_array("tip_angle", self.tip_angle, (), unit=" rad") if self.tip_angle is not None else None
+        tip = as_array("tip_angle", self.tip_angle, unit=" rad") if self.tip_angle is not None else None
         if direction is not None and tip is not None:
             raise ValueError("give at most one of direction (a unit tangent) and tip_angle (in-plane), not both")
         weights = {}
@@ -343,6 +343,10 @@ MU_GIVE_UP = 1e10
 """Damping at which a phase stops: no step it could take lowers its merit."""
 STEP_TOL = 1e-11
 """Phase 2 has converged when its step of the scaled inputs is below this (max norm) on the target."""
+BOUNDARY_WEIGHT = 1e6
+"""Weight of the tip boundary residual against the task residual in the augmented merit."""
+STALLED = 1e-10
+"""An accepted phase-1 step that lowers |e|^2 by less than this, relatively, ends phase 1."""
 STATIONARY = 1e-7
 """Phase 1 ends above the tolerance (UNREACHABLE) when the projected gradient of |e|^2 / 2 is
 below this, relative to |G| |e|: the nearest reachable pose, to about that relative precision."""
@@ -364,15 +368,16 @@ def _damping(mu, nu, actual, predicted):
     return jnp.where(accepted, mu_ok, mu * nu), jnp.where(accepted, 2.0, 2 * nu), accepted
 
 
-def _reach_status(e, G, v, mu, it, prob: Problem, tol, max_steps):
+def _reach_status(e, G, v, mu, it, prob: Problem, tol, max_steps, stalled=False):
     """(status code, done) of phase 1 at a point: reached, stationary above tol (the projected
-    gradient of |e|^2 / 2 vanishes, or no step lowers it), or out of steps."""
+    gradient of |e|^2 / 2 vanishes, no step lowers it, or the last step lowered it by a relative
+    STALLED or less), or out of steps."""
     g = G.T @ e
     free = jnp.where(v <= prob.lo, g < 0, jnp.where(v >= prob.hi, g > 0, True))
     projected = jnp.max(jnp.abs(jnp.where(free, g, 0.0)))
     scale = jnp.linalg.norm(G) * jnp.linalg.norm(e) + 1e-300
     reached = jnp.max(jnp.abs(e)) <= tol
-    stationary = (projected <= STATIONARY * scale) | (mu >= MU_GIVE_UP)
+    stationary = (projected <= STATIONARY * scale) | (mu >= MU_GIVE_UP) | stalled
     code = jnp.where(reached, status.SUCCESS, jnp.where(stationary, status.UNREACHABLE, status.OUTER_LIMIT))
     return code.astype(jnp.int32), reached | stationary | (it >= max_steps)
 
@@ -398,8 +403,9 @@ def reach_nested(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reac
         linear = ev.e + ev.G @ s
         actual = jnp.where(trial.code == status.SUCCESS, ev.e @ ev.e - trial.e @ trial.e, -jnp.inf)
         mu, nu, better = _damping(mu, nu, actual, ev.e @ ev.e - linear @ linear)
+        stalled = better & (actual <= STALLED * (ev.e @ ev.e))
         v, ev = jax.tree.map(lambda a, b: jnp.where(better, a, b), (v + s, trial), (v, ev))
-        code, done = _reach_status(ev.e, ev.G, v, mu, it + 1, prob, tol, max_steps)
+        code, done = _reach_status(ev.e, ev.G, v, mu, it + 1, prob, tol, max_steps, stalled)
         return v, ev, mu, nu, it + 1, code, done
 
     ev0 = evaluate(v0, wrench0, prob, plan)
@@ -434,7 +440,9 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> R
         return F, (dx0, K, Ev + Ex @ K, e + Ex @ dx0)
 
     def merit(F):
-        return jnp.where(jnp.all(jnp.isfinite(F)), F @ F, jnp.inf)
+        """The boundary residual weighs far more than the task: steps that restore r(x, v) = 0 are
+        taken even where they move e the wrong way."""
+        return jnp.where(jnp.all(jnp.isfinite(F)), BOUNDARY_WEIGHT * F[:6] @ F[:6] + F[6:] @ F[6:], jnp.inf)
 
     def cond(c):
         return ~c[-1]
@@ -447,11 +455,15 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> R
         F_t, lin_t = linearise(trial)
         linear = e + G @ s  # the model: Newton takes r to 0, Gauss-Newton e to this
         mu, nu, better = _damping(mu, nu, merit(F) - merit(F_t), merit(F) - linear @ linear)
+        stalled = better & (merit(F) - merit(F_t) <= STALLED * merit(F))
         z, F, lin = jax.tree.map(lambda a, b: jnp.where(better, a, b), (trial, F_t, lin_t), (z, F, lin))
-        code, done = _reach_status(F[6:], lin[2], z[6:], mu, it + 1, prob, tol, max_steps)
-        boundary_ok = jnp.max(jnp.abs(F[:6])) <= prob.solver.tol
-        # reached or stationary only once the boundary residual has converged too
-        code = jnp.where(boundary_ok, code, jnp.int32(status.OUTER_LIMIT))
+        code, done = _reach_status(F[6:], lin[2], z[6:], mu, it + 1, prob, tol, max_steps, stalled)
+        # reached only with the boundary residual converged too; stationary (UNREACHABLE) once it is
+        # near enough for the closing forward solve to converge from here
+        r = jnp.max(jnp.abs(F[:6]))
+        code = jnp.where((code == status.SUCCESS) & (r > prob.solver.tol), jnp.int32(status.OUTER_LIMIT), code)
+        code = jnp.where((code == status.UNREACHABLE) & (r > jnp.sqrt(prob.solver.tol)), jnp.int32(status.OUTER_LIMIT), code)
+        boundary_ok = code != status.OUTER_LIMIT
         return z, F, lin, mu, nu, it + 1, code, done & (boundary_ok | (it + 1 >= max_steps) | (mu >= MU_GIVE_UP))
 
     z0 = jnp.concatenate([scaled(robot, wrench0, F_s), v0])
@@ -502,7 +514,7 @@ def optimise(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
         code = jnp.where(
             converged, status.SUCCESS, jnp.where(mu >= MU_GIVE_UP, status.CONTINUATION_EXHAUSTED, status.OUTER_LIMIT)
         )
-        return v, ev, H, rho, mu, it + 1, code, done
+        return v, ev, H, rho, mu, it + 1, code.astype(jnp.int32), done
 
     init = (v0, ev0, jnp.eye(n), jnp.asarray(1.0), jnp.asarray(0.0), 0, jnp.int32(status.OUTER_LIMIT), ev0.code != status.SUCCESS)
     v, ev, _, _, _, it, code, _ = lax.while_loop(cond, body, init)
@@ -525,14 +537,14 @@ def _damped_bfgs(H, s, y):
 # ----------------------------------------------------------------------------- the solve and its derivatives
 
 
-def default_start(prob: Problem, plan: Plan):
-    """A start from the target alone: the circular arc from the base (tangent +z) through the
-    target's position, less the sag that the tip load and the robot's weight would cause on their
-    own (a linear cantilever estimate), fixes a bending angle; the tendons on that side pull with
-    the tension whose moment bends the silicone so far, no tube."""
-    robot, p = prob.robot, prob.target.position
+def default_start(prob: Problem, plan: Plan, p, force):
+    """A start from the target position p [m] alone: the circular arc from the base (tangent +z)
+    through p, less the sag that the tip force [N] and the robot's weight would cause on their own
+    (a linear cantilever estimate), fixes a bending angle; the tendons on that side pull with the
+    tension whose moment bends the silicone so far, no tube."""
+    robot = prob.robot
     L, EI = robot.length, robot.bending_stiffness(False)[0]
-    sag = (prob.load.force * L**3 / 3 + robot.linear_density(False) * prob.gravity * L**4 / 8) / EI
+    sag = (force * L**3 / 3 + robot.linear_density(False) * prob.gravity * L**4 / 8) / EI
     sag = sag * jnp.minimum(1.0, 0.5 * L / jnp.maximum(jnp.linalg.norm(sag[:2]), 1e-300))
     x, y = p[0] - sag[0], p[1] - sag[1]
     angle = 2 * jnp.arctan2(jnp.hypot(x, y), jnp.maximum(p[2], 0.0))
@@ -562,7 +574,7 @@ def starts(v0, prob: Problem, plan: Plan):
         return v.at[k].set(lo[k] + where * (hi[k] - lo[k])) if plan.insertion else v
 
     quarter = lo + 0.25 * (hi - lo)
-    arc = default_start(prob, plan)
+    arc = default_start(prob, plan, prob.target.position, prob.load.force)
     return jnp.stack(
         [v0, with_insertion(lo, 0.0), with_insertion(lo, 1.0), with_insertion(quarter, 0.5), with_insertion(arc, 1.0)]
     )
@@ -590,7 +602,10 @@ def find(prob: Problem, v0, wrench0, n_starts, plan: Plan, tol, max_steps) -> Fo
         sol0 = solution_and_compliance(prob.robot, actuation_of(v, prob, plan), prob.load, prob.gravity, guess, prob.solver)[0]
         r = reach(v, sol0.base_wrench, prob, plan, tol, max_steps)
         r = r._replace(code=jnp.where(sol0.result == status.SUCCESS, r.code, sol0.result))
-        closer = (r.code == status.SUCCESS) | (r.e @ r.e < best.e @ best.e)
+        rank, best_rank = (
+            jnp.where(x.code == status.SUCCESS, 0, jnp.where(x.code == status.UNREACHABLE, 1, 2)) for x in (r, best)
+        )
+        closer = (rank < best_rank) | ((rank == best_rank) & (r.e @ r.e < best.e @ best.e))
         return k + 1, jax.tree.map(lambda a, b: jnp.where(closer, a, b), r, best), steps + r.steps
 
     none = Reach(v0, jnp.full(6, jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT))
@@ -743,38 +758,47 @@ def inverse_kinematics(
 
 
 def _batched(run, prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
-    """Many targets (a leading axis on ``prob.target``). With concrete values they run through the
-    batch engine in chunks, each target from its first start only; those that did not reach run
-    again from every start, so that a few hard targets do not hold up the rest. Traced (inside the
-    caller's jit or vmap): one vmap, every start allowed."""
+    """Many targets (a leading axis on ``prob.target``, and on ``prob.load`` when it has one).
+    With concrete values they run through the batch engine in chunks, each target from its first
+    start only; those that did not reach run again from every start, so that a few hard targets
+    do not hold up the rest. Traced (inside the caller's jit or vmap): one vmap, every start."""
+    loads = jnp.ndim(prob.load.force) == 2
+    per = (prob.target, prob.load if loads else None)
     if not all(is_concrete(x) for x in jax.tree.leaves((prob, v0))):
-        return jax.vmap(lambda t, v: run(prob._replace(target=t), v, wrench0, plan)[0])(prob.target, v0)
-    leaves, tree = jax.tree.flatten(prob.target)
-    points = {f"target{i}": np.asarray(leaf) for i, leaf in enumerate(leaves)} | {"v0": np.asarray(v0)}
-    kernel = Kernel(_ik_point, (("plan", plan), ("tree", tree)) + tuple(run.keywords.items()))
-    base = (prob._replace(target=None), wrench0)
+        return jax.vmap(lambda per, v: run(_one(prob, per), v, wrench0, plan)[0])(per, v0)
+    leaves, tree = jax.tree.flatten(per)
+    own = tuple(i for i, leaf in enumerate(leaves) if np.ndim(leaf) >= 1)  # the rest (weights) are shared
+    points = {f"in{i}": np.asarray(leaves[i]) for i in own} | {"v0": np.asarray(v0)}
+    kernel = Kernel(_ik_point, (("plan", plan), ("tree", tree), ("own", own)) + tuple(run.keywords.items()))
+    base = (prob._replace(target=None, load=None if loads else prob.load), wrench0, leaves)
     out = run_batched(kernel, base, points | {"starts": np.ones(len(v0), np.int32)}, progress=False)
-    again = np.flatnonzero(out["result"] != status.SUCCESS)
-    if again.size:
-        retry = {k: v[again] for k, v in points.items()} | {"starts": np.full(again.size, STARTS, np.int32)}
+    again = np.flatnonzero(out[".result"] != status.SUCCESS)
+    if again.size:  # padded to the first pass's chunk, whose compiled program it reuses
+        rows = np.concatenate([again, np.full(max(lanes_per_call(len(v0), default_chunk_size()) - again.size, 0), again[-1])])
+        retry = {k: v[rows] for k, v in points.items()} | {"starts": np.full(rows.size, STARTS, np.int32)}
         for k, v in run_batched(kernel, base, retry, progress=False).items():
-            out[k][again] = v
-    return _from_outputs(out, run, prob, plan, v0, wrench0)
+            out[k][again] = v[: again.size]
+    shape = jax.eval_shape(
+        lambda: run(_one(prob, jax.tree.map(lambda a: a[0] if jnp.ndim(a) else a, per)), v0[0], wrench0, plan)[0]
+    )
+    paths, tree = jax.tree_util.tree_flatten_with_path(shape)
+    return jax.tree.unflatten(tree, [jnp.asarray(out[jax.tree_util.keystr(path)]) for path, _ in paths])
+
+
+def _one(prob: Problem, per) -> Problem:
+    """The problem of one target of a batch: its target, and its load where each has its own."""
+    target, load = per
+    return prob._replace(target=target, load=prob.load if load is None else load)
 
 
 def _ik_point(base, point, kernel: Kernel) -> dict:
-    prob, wrench0 = base
-    target = jax.tree.unflatten(kernel.option("tree"), [point[f"target{i}"] for i in range(kernel.option("tree").num_leaves)])
+    prob, wrench0, leaves = base
+    own = kernel.option("own")
+    leaves = [point[f"in{i}"] if i in own else leaf for i, leaf in enumerate(leaves)]
+    prob = _one(prob, jax.tree.unflatten(kernel.option("tree"), leaves))
     options = dict(tol=kernel.option("tol"), max_steps=kernel.option("max_steps"), n_starts=point["starts"])
-    result = _solve_ik(prob._replace(target=target), point["v0"], wrench0, kernel.option("plan"), **options)[0]
-    return {str(i): leaf for i, leaf in enumerate(jax.tree.leaves(result))}
-
-
-def _from_outputs(out: dict, run, prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
-    """The IKResult of a batch from the engine's flat outputs."""
-    one = jax.tree.map(lambda a: a[0], prob.target)
-    shape = jax.eval_shape(lambda: run(prob._replace(target=one), v0[0], wrench0, plan)[0])
-    return jax.tree.unflatten(jax.tree.structure(shape), [jnp.asarray(out[str(i)]) for i in range(len(out))])
+    result = _solve_ik(prob, point["v0"], wrench0, kernel.option("plan"), **options)[0]
+    return {jax.tree_util.keystr(path): leaf for path, leaf in jax.tree_util.tree_flatten_with_path(result)[0]}
 
 
 def track(robot: Robot, targets: Target, **options) -> IKResult:
@@ -874,7 +898,7 @@ def _problem(
         target = Target(target)
     load = TipLoad() if load is None else load
     base = Actuation(np.zeros(robot.n_tendons)) if guess is None else guess
-    check_inputs(robot, base, load, solver)
+    check_inputs(robot, base, load, solver, batch=jnp.ndim(target.position) == 2)
     n_t = robot.n_tendons
     tendons = tuple(range(1, n_t + 1)) if tendons is None else tuple(tendons)
     for t in tendons:
@@ -931,7 +955,12 @@ def _problem(
     plan = Plan(tuple(t - 1 for t in tendons), insertion is None, objective, method)
     batched = jnp.ndim(target.position) == 2
     if guess is None:
-        start = jax.vmap(lambda t: default_start(prob._replace(target=t), plan))(target) if batched else default_start(prob, plan)
+        forces = jnp.broadcast_to(jnp.asarray(load.force), jnp.shape(target.position))
+        start = (
+            jax.vmap(lambda p, f: default_start(prob, plan, p, f))(target.position, forces)
+            if batched
+            else default_start(prob, plan, target.position, load.force)
+        )
     else:
         start = jnp.clip(scaled_inputs(guess, prob, plan), prob.lo, prob.hi)
         start = jnp.broadcast_to(start, (len(target.position),) + start.shape) if batched else start

@@ -22,13 +22,8 @@ def round_trip(robot):
     tensions = rng.uniform(0, 10, (n, 4)) * (rng.random((n, 4)) < 0.5)
     insertion, mass = rng.uniform(0, 0.16, n), rng.uniform(0, 0.05, n)
     forward = tdct.sweep(robot, batch={"tensions": tensions, "insertion": insertion, "tip_mass": mass}, progress=False)
-    targets = tdct.Target(forward.tip_position)
-    loads = tdct.TipLoad(np.multiply.outer(mass, G), np.zeros((n, 3)))
-
-    def one(target, force):
-        return tdct.inverse_kinematics(robot, target, load=tdct.TipLoad(force), throw=False)
-
-    return forward, jax.jit(jax.vmap(one))(targets, loads.force)
+    loads = tdct.TipLoad.from_mass(mass)  # a batch of loads, one per target
+    return forward, tdct.inverse_kinematics(robot, tdct.Target(forward.tip_position), load=loads, throw=False)
 
 
 def test_round_trip_reaches_random_reachable_targets_within_bounds(round_trip):
@@ -42,3 +37,86 @@ def test_round_trip_reaches_random_reachable_targets_within_bounds(round_trip):
     assert insertion.min() >= 0.0 and insertion.max() <= 0.16
     # the tip of the IK's own forward solution is where the independent forward sweep put it
     np.testing.assert_allclose(np.asarray(result.tip_position)[reached], forward.tip_position[reached], rtol=0, atol=REACH_M)
+
+
+@pytest.mark.parametrize("position", [(0.0, 0.0, 0.20), (0.0, 0.03, -0.03)], ids=["beyond the length", "behind the base"])
+def test_unreachable_targets_return_the_nearest_pose_a_brute_force_search_finds(robot, position):
+    result = tdct.inverse_kinematics(robot, tdct.Target(position), tendons=(1,))
+    assert int(result.result) == tdct.status.UNREACHABLE
+    grid = tdct.sweep(
+        robot,
+        grid={"tensions": np.outer(np.linspace(0, 10, 101), [1.0, 0, 0, 0]), "insertion": np.linspace(0, 0.16, 81)},
+        progress=False,
+    )
+    brute = np.linalg.norm(grid.tip_position - np.asarray(position), axis=-1).min()
+    print(f"nearest distance: IK {1e3 * float(result.position_error):.4f} mm, brute force {1e3 * brute:.4f} mm")
+    assert abs(float(result.position_error) - brute) <= 0.01 * brute
+    np.testing.assert_allclose(np.linalg.norm(np.asarray(result.tip_position) - position), result.position_error, rtol=1e-12)
+
+
+HEIGHT, MASS = 0.03, 0.02  # a tip height reached with tendon 1 and the tube, 20 g held
+
+
+@pytest.fixture(scope="module")
+def stiffest(robot):
+    target = tdct.Target((0.0, HEIGHT, 0.0), axes="y")
+    options = dict(load=tdct.TipLoad.from_mass(MASS), tendons=(1,), objective="stiffness", direction=(0.0, -1.0, 0.0))
+    return tdct.inverse_kinematics(robot, target, **options)
+
+
+def test_stiffest_solution_beats_every_solution_of_a_1_mm_insertion_scan(robot, stiffest):
+    load, d = tdct.TipLoad.from_mass(MASS), np.array([0.0, -1.0, 0.0])
+    best = d @ np.asarray(tdct.compliance(robot, stiffest.actuation, load)) @ d
+    np.testing.assert_allclose(stiffest.objective, best, rtol=1e-9)  # the same compliance from two solves
+    scan = []
+    for depth in np.arange(0.0, 0.1605, 0.001):
+        fixed = tdct.inverse_kinematics(
+            robot, tdct.Target((0.0, HEIGHT, 0.0), axes="y"), load=load, tendons=(1,), insertion=depth, throw=False
+        )
+        if int(fixed.result) == tdct.status.SUCCESS:
+            scan.append(d @ np.asarray(tdct.compliance(robot, fixed.actuation, load)) @ d)
+    print(
+        f"stiffest: {1e3 * best:.5f} mm/N at {1e3 * float(stiffest.actuation.insertion):.3f} mm; scan of {len(scan)}: {1e3 * min(scan):.5f}"
+    )
+    assert len(scan) > 50 and best <= min(scan) * (1 + 1e-6)
+
+
+def test_stiffest_solution_is_first_order_optimal(robot, stiffest):
+    """KKT from the public Jacobians: the objective's gradient is balanced by the task on the free
+    inputs (multiplier lam), and pushes against every input held at a bound."""
+    load, d = tdct.TipLoad.from_mass(MASS), np.array([0.0, -1.0, 0.0])
+    act = stiffest.actuation
+
+    def compliance_along(w):  # w = (tension 1 [N], insertion [m])
+        a = tdct.Actuation(jax.numpy.stack([w[0], 0.0, 0.0, 0.0]), w[1])
+        return d @ tdct.compliance(robot, a, load) @ d
+
+    w = np.array([float(act.tensions[0]), float(act.insertion)])
+    grad = np.asarray(jax.jacfwd(compliance_along)(w))
+    G = np.asarray(tdct.kinematic_jacobian(robot, act, load))[1, [0, 4]]  # d tip y / d (tension 1, insertion)
+    scale = np.array([10.0, 0.16])  # the inputs' ranges
+    grad, G = grad * scale, G * scale
+    at_upper = w >= np.array([10.0, 0.16]) - 1e-12
+    at_lower = w <= 1e-12
+    free = ~(at_upper | at_lower)
+    lam = -np.linalg.lstsq(G[free, None], grad[free], rcond=None)[0][0]
+    reduced = grad + G * lam
+    assert np.abs(reduced[free]).max() <= 1e-8 * np.abs(grad).max()
+    assert np.all(reduced[at_upper] <= 1e-8 * np.abs(grad).max()) and np.all(reduced[at_lower] >= -1e-8 * np.abs(grad).max())
+
+
+def test_actuation_derivative_in_the_target_matches_central_differences(robot):
+    def tension_and_insertion(position):
+        result = tdct.inverse_kinematics(robot, tdct.Target(position, axes="yz"), tendons=(1,), throw=False)
+        return jax.numpy.stack([result.actuation.tensions[0], result.actuation.insertion])
+
+    p = np.asarray(tdct.solve(robot, tdct.Actuation((6.0, 0, 0, 0), 0.06)).tip_position)  # reachable: a forward tip
+    exact = np.asarray(jax.jacfwd(tension_and_insertion)(p))[:, 1:]
+    h = 1e-6
+    fd = np.column_stack(
+        [
+            (np.asarray(tension_and_insertion(p + h * e)) - np.asarray(tension_and_insertion(p - h * e))) / (2 * h)
+            for e in np.eye(3)[1:]
+        ]
+    )
+    assert np.abs(exact - fd).max() <= 1e-6 * np.abs(fd).max()
