@@ -390,37 +390,50 @@ class Reach(NamedTuple):
     code: jax.Array  # SUCCESS (reached), UNREACHABLE (stationary above tol), or a failure code
 
 
+def _unset(f, *args):
+    """Zeros shaped like f(*args) (no evaluation): the loop state before the start is evaluated."""
+    return jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), jax.eval_shape(f, *args))
+
+
+def _where(keep, new, old):
+    return jax.tree.map(lambda a, b: jnp.where(keep, a, b), new, old)
+
+
 def reach_nested(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
-    """Phase 1 with a converged forward solve (implicitly differentiated) at every trial."""
+    """Phase 1 with a converged forward solve (implicitly differentiated) at every trial. The
+    loop's first pass evaluates the start, so the evaluation is compiled once."""
 
     def cond(c):
         return ~c[-1]
 
     def body(c):
-        v, ev, mu, nu, it, code, _ = c
-        s = _lm_step(ev.G, ev.e, mu, prob.lo - v, prob.hi - v)
+        v, ev, s, mu, nu, it, code, _ = c
+        first = it == 0
         trial = evaluate(v + s, ev.wrench, prob, plan)
         linear = ev.e + ev.G @ s
         actual = jnp.where(trial.code == status.SUCCESS, ev.e @ ev.e - trial.e @ trial.e, -jnp.inf)
-        mu, nu, better = _damping(mu, nu, actual, ev.e @ ev.e - linear @ linear)
-        stalled = better & (actual <= STALLED * (ev.e @ ev.e))
-        v, ev = jax.tree.map(lambda a, b: jnp.where(better, a, b), (v + s, trial), (v, ev))
-        code, done = _reach_status(ev.e, ev.G, v, mu, it + 1, prob, tol, max_steps, stalled)
-        return v, ev, mu, nu, it + 1, code, done
+        damped = _damping(mu, nu, actual, ev.e @ ev.e - linear @ linear)
+        mu, nu = jnp.where(first, mu, damped[0]), jnp.where(first, nu, damped[1])
+        better = first | damped[2]
+        stalled = ~first & better & (actual <= STALLED * (ev.e @ ev.e))
+        v, ev = _where(better, (v + s, trial), (v, ev))
+        code, done = _reach_status(ev.e, ev.G, v, mu, it, prob, tol, max_steps, stalled)
+        solved = ev.code == status.SUCCESS
+        s = _lm_step(ev.G, ev.e, mu, prob.lo - v, prob.hi - v)
+        return v, ev, s, mu, nu, it + 1, jnp.where(solved, code, ev.code), done | ~solved
 
-    ev0 = evaluate(v0, wrench0, prob, plan)
-    code0, done0 = _reach_status(ev0.e, ev0.G, v0, MU_START, 0, prob, tol, max_steps)
-    solved = ev0.code == status.SUCCESS
-    init = (v0, ev0, jnp.asarray(MU_START), jnp.asarray(2.0), 0, jnp.where(solved, code0, ev0.code), done0 | ~solved)
-    v, ev, _, _, it, code, _ = lax.while_loop(cond, body, init)
-    return Reach(v, ev.wrench, ev.e, it, code)
+    start = _unset(lambda v: evaluate(v, wrench0, prob, plan), v0)._replace(wrench=wrench0)
+    init = (v0, start, jnp.zeros_like(v0), jnp.asarray(MU_START), jnp.asarray(2.0), 0, jnp.int32(status.OUTER_LIMIT), False)
+    v, ev, _, _, _, it, code, _ = lax.while_loop(cond, body, init)
+    return Reach(v, ev.wrench, ev.e, it - 1, code)
 
 
 def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
     """Phase 1 on the shooting unknowns x and the inputs v together: each step is Newton on the
     tip boundary residual r(x, v) = 0 with Gauss-Newton on e for v, from one forward-mode
     Jacobian pass of (r, e) in (x, v); x is eliminated, so the bounded step is taken in v alone.
-    ``wrench0`` must be the converged base wrench at v0."""
+    ``wrench0`` must be the converged base wrench at v0. The loop's first pass linearises at the
+    start, so the Jacobian pass is compiled once."""
     robot, L = prob.robot, prob.robot.length
     F_s = force_scale(robot, actuation_of(v0, prob, plan), prob.load, prob.gravity)
 
@@ -448,31 +461,33 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> R
         return ~c[-1]
 
     def body(c):
-        z, F, lin, mu, nu, it, code, _ = c
+        z, F, lin, s, mu, nu, it, code, _ = c
+        first = it == 0
         dx0, K, G, e = lin
-        s = _lm_step(G, e, mu, prob.lo - z[6:], prob.hi - z[6:])
         trial = z + jnp.concatenate([dx0 + K @ s, s])
         F_t, lin_t = linearise(trial)
         linear = e + G @ s  # the model: Newton takes r to 0, Gauss-Newton e to this
-        mu, nu, better = _damping(mu, nu, merit(F) - merit(F_t), merit(F) - linear @ linear)
-        stalled = better & (merit(F) - merit(F_t) <= STALLED * merit(F))
-        z, F, lin = jax.tree.map(lambda a, b: jnp.where(better, a, b), (trial, F_t, lin_t), (z, F, lin))
-        code, done = _reach_status(F[6:], lin[2], z[6:], mu, it + 1, prob, tol, max_steps, stalled)
+        damped = _damping(mu, nu, merit(F) - merit(F_t), merit(F) - linear @ linear)
+        mu, nu = jnp.where(first, mu, damped[0]), jnp.where(first, nu, damped[1])
+        better = first | damped[2]
+        stalled = ~first & better & (merit(F) - merit(F_t) <= STALLED * merit(F))
+        z, F, lin = _where(better, (trial, F_t, lin_t), (z, F, lin))
+        code, done = _reach_status(F[6:], lin[2], z[6:], mu, it, prob, tol, max_steps, stalled)
         # reached only with the boundary residual converged too; stationary (UNREACHABLE) once it is
         # near enough for the closing forward solve to converge from here
         r = jnp.max(jnp.abs(F[:6]))
         code = jnp.where((code == status.SUCCESS) & (r > prob.solver.tol), jnp.int32(status.OUTER_LIMIT), code)
         code = jnp.where((code == status.UNREACHABLE) & (r > jnp.sqrt(prob.solver.tol)), jnp.int32(status.OUTER_LIMIT), code)
-        boundary_ok = code != status.OUTER_LIMIT
-        return z, F, lin, mu, nu, it + 1, code, done & (boundary_ok | (it + 1 >= max_steps) | (mu >= MU_GIVE_UP))
+        done = done & ((code != status.OUTER_LIMIT) | (it >= max_steps) | (mu >= MU_GIVE_UP))
+        s = _lm_step(lin[2], lin[3], mu, prob.lo - z[6:], prob.hi - z[6:])
+        return z, F, lin, s, mu, nu, it + 1, code, done
 
     z0 = jnp.concatenate([scaled(robot, wrench0, F_s), v0])
-    F0, lin0 = linearise(z0)
-    code0, done0 = _reach_status(F0[6:], lin0[2], v0, MU_START, 0, prob, tol, max_steps)
-    init = (z0, F0, lin0, jnp.asarray(MU_START), jnp.asarray(2.0), 0, code0, done0)
-    z, F, _, _, _, it, code, _ = lax.while_loop(cond, body, init)
+    F0, lin0 = _unset(linearise, z0)
+    init = (z0, F0, lin0, jnp.zeros_like(v0), jnp.asarray(MU_START), jnp.asarray(2.0), 0, jnp.int32(status.OUTER_LIMIT), False)
+    z, F, _, _, _, _, it, code, _ = lax.while_loop(cond, body, init)
     wrench = jnp.concatenate([z[:3] * F_s, z[3:6] * F_s * L])
-    return Reach(z[6:], wrench, F[6:], it, code)
+    return Reach(z[6:], wrench, F[6:], it - 1, code)
 
 
 # ----------------------------------------------------------------------------- phase 2: optimise
@@ -480,46 +495,58 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> R
 
 def optimise(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
     """Phase 2: min phi(v) subject to e(v) = 0 and the bounds, by SQP (damped BFGS Hessian of the
-    Lagrangian, exact active-set subproblems, l1 merit phi / phi_0 + rho |e|_1)."""
-    ev0 = evaluate(v0, wrench0, prob, plan)
-    scale = jnp.maximum(jnp.abs(ev0.phi), 1e-300)
+    Lagrangian, exact active-set subproblems, l1 merit phi / phi_0 + rho |e|_1). The loop's first
+    pass evaluates the start (phi_0 there), so the evaluation is compiled once."""
     n = v0.shape[0]
 
-    def lagrangian_gradient(ev, lam):
-        return ev.dphi / scale + ev.G.T @ lam
+    def merit(ev, scale, rho):
+        ok = jnp.all(jnp.isfinite(ev.e)) & (ev.code == status.SUCCESS)
+        return jnp.where(ok, ev.phi / scale + rho * jnp.sum(jnp.abs(ev.e)), jnp.inf)
 
     def cond(c):
         return ~c[-1]
 
     def body(c):
-        v, ev, H, rho, mu, it, code, _ = c
+        v, ev, H, s, lam, scale, rho, mu, it, code, _ = c
+        first = it == 0
+        trial = evaluate(v + s, ev.wrench, prob, plan)
+        scale = jnp.where(first, jnp.maximum(jnp.abs(trial.phi), 1e-300), scale)
+        better = first | (merit(trial, scale, rho) <= merit(ev, scale, rho) - 1e-15 * jnp.abs(merit(ev, scale, rho)))
+        y = (trial.dphi - ev.dphi) / scale + (trial.G - ev.G).T @ lam
+        H = jnp.where(better & ~first, _damped_bfgs(H, s, y), H)
+        v, ev = _where(better, (v + s, trial), (v, ev))
+        mu = jnp.where(first, mu, jnp.where(better, jnp.where(mu < 1e-10, 0.0, mu / 10), jnp.maximum(10 * mu, 1e-6)))
+        # the next step, from the QP at the current point
         s, lam, ok = box_qp(H + mu * jnp.eye(n), ev.dphi / scale, prob.lo - v, prob.hi - v, J=ev.G, c=-ev.e)
         s = jnp.where(ok, s, _lm_step(ev.G, ev.e, jnp.maximum(mu, MU_START), prob.lo - v, prob.hi - v))
         lam = jnp.where(ok, lam, 0.0)
-        converged = ok & (mu == 0) & (jnp.max(jnp.abs(s)) <= STEP_TOL) & (jnp.max(jnp.abs(ev.e)) <= tol)
-        trial = evaluate(v + s, ev.wrench, prob, plan)
         rho = jnp.maximum(rho, 2 * jnp.max(jnp.abs(lam), initial=0.0) + 1e-6)
-
-        def merit(ev):
-            return jnp.where(
-                jnp.all(jnp.isfinite(ev.e)) & (ev.code == status.SUCCESS), ev.phi / scale + rho * jnp.sum(jnp.abs(ev.e)), jnp.inf
-            )
-
-        better = ~converged & (merit(trial) <= merit(ev) - 1e-15 * jnp.abs(merit(ev)))
-        y = lagrangian_gradient(trial, lam) - lagrangian_gradient(ev, lam)
-        H_new = _damped_bfgs(H, s, y)
-        v, ev, H = jax.tree.map(lambda a, b: jnp.where(better, a, b), (v + s, trial, H_new), (v, ev, H))
-        mu = jnp.where(better, jnp.where(mu < 1e-10, 0.0, mu / 10), jnp.maximum(10 * mu, 1e-6))
-        done = converged | (it + 1 >= max_steps) | (mu >= MU_GIVE_UP)
+        converged = ok & (mu == 0) & (jnp.max(jnp.abs(s)) <= STEP_TOL) & (jnp.max(jnp.abs(ev.e)) <= tol)
+        failed = ev.code != status.SUCCESS
         code = jnp.where(
             converged, status.SUCCESS, jnp.where(mu >= MU_GIVE_UP, status.CONTINUATION_EXHAUSTED, status.OUTER_LIMIT)
         )
-        return v, ev, H, rho, mu, it + 1, code.astype(jnp.int32), done
+        done = converged | failed | (it >= max_steps) | (mu >= MU_GIVE_UP)
+        return v, ev, H, s, lam, scale, rho, mu, it + 1, jnp.where(failed, ev.code, code).astype(jnp.int32), done
 
-    init = (v0, ev0, jnp.eye(n), jnp.asarray(1.0), jnp.asarray(0.0), 0, jnp.int32(status.OUTER_LIMIT), ev0.code != status.SUCCESS)
-    v, ev, _, _, _, it, code, _ = lax.while_loop(cond, body, init)
-    code = jnp.where(ev0.code == status.SUCCESS, code, ev0.code)
-    return Reach(v, ev.wrench, ev.e, it, code)
+    start = _unset(lambda v: evaluate(v, wrench0, prob, plan), v0)._replace(wrench=wrench0)
+    m = prob.target.size
+    zero = jnp.zeros_like(v0)
+    init = (
+        v0,
+        start,
+        jnp.eye(n),
+        zero,
+        jnp.zeros(m),
+        1.0,
+        jnp.asarray(1.0),
+        jnp.asarray(0.0),
+        0,
+        jnp.int32(status.OUTER_LIMIT),
+        False,
+    )
+    v, ev, *_, it, code, _ = lax.while_loop(cond, body, init)
+    return Reach(v, ev.wrench, ev.e, it - 1, code)
 
 
 def _damped_bfgs(H, s, y):
@@ -813,24 +840,27 @@ def track(robot: Robot, targets: Target, **options) -> IKResult:
         IKResult with a leading axis over the targets.
     """
     throw = options.pop("throw", True)
-    first = jax.tree.map(lambda a: a[0], targets)
+    leaves, tree = jax.tree.flatten(targets)
+    own = tuple(i for i, leaf in enumerate(leaves) if jnp.ndim(leaf) >= 1)  # the rest (weights) are shared
+    first = jax.tree.unflatten(tree, [leaf[0] if i in own else leaf for i, leaf in enumerate(leaves)])
     prob, plan, v0, wrench0 = _problem(robot, first, **_ik_options(options))
     tol, max_steps = float(options.get("tol", TOL)), int(options.get("max_steps", MAX_STEPS))
-    result = _track(prob, targets, v0, wrench0, plan, tol, max_steps)
+    result = _track(prob, leaves, v0, wrench0, plan, tol, max_steps, tree, own)
     _check(result, throw, max_steps)
     return result
 
 
-@functools.partial(jax.jit, static_argnames=("plan", "tol", "max_steps"))
-def _track(prob, targets, v0, wrench0, plan, tol, max_steps):
-    def step(carry, target):
+@functools.partial(jax.jit, static_argnames=("plan", "tol", "max_steps", "tree", "own"))
+def _track(prob, leaves, v0, wrench0, plan, tol, max_steps, tree, own):
+    def step(carry, xs):
         v, wrench = carry
+        target = jax.tree.unflatten(tree, [xs[own.index(i)] if i in own else leaf for i, leaf in enumerate(leaves)])
         result, wrench_new = _solve_ik(prob._replace(target=target), v, wrench, plan, tol=tol, max_steps=max_steps)
         ok = result.result == status.SUCCESS
         v_new = scaled_inputs(result.actuation, prob, plan)
         return (jnp.where(ok, v_new, v), jnp.where(ok, wrench_new, wrench)), result
 
-    return lax.scan(step, (v0, wrench0), targets)[1]
+    return lax.scan(step, (v0, wrench0), [leaves[i] for i in own])[1]
 
 
 def _ik_options(options: dict) -> dict:

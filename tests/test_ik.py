@@ -120,3 +120,58 @@ def test_actuation_derivative_in_the_target_matches_central_differences(robot):
         ]
     )
     assert np.abs(exact - fd).max() <= 1e-6 * np.abs(fd).max()
+
+
+def test_tracking_a_path_equals_solving_each_target_alone(robot):
+    acts = [tdct.Actuation((t, 0, 0, 0), 0.05) for t in (4.0, 4.5, 5.0, 5.5)]
+    tips = np.stack([np.asarray(tdct.solve(robot, a).tip_position) for a in acts])
+    tracked = tdct.track(robot, tdct.Target(tips, axes="yz"), tendons=(1,), insertion=0.05)
+    assert np.all(np.asarray(tracked.result) == tdct.status.SUCCESS)
+    np.testing.assert_allclose(np.asarray(tracked.actuation.tensions)[:, 0], [4.0, 4.5, 5.0, 5.5], rtol=1e-8)
+    assert np.asarray(tracked.iterations)[1:].max() <= np.asarray(tracked.iterations)[0]  # warm starts need no more steps
+
+
+@pytest.mark.parametrize(
+    "make, words",
+    [
+        (lambda r: tdct.Target((0.0, np.nan, 0.1)), ["position must be finite"]),
+        (lambda r: tdct.Target((0.0, 0.1)), ["position must have shape (3,)"]),
+        (lambda r: tdct.Target((0.0, 0.0, 0.1), direction=(0.0, 0.0, 0.0)), ["direction", "nonzero"]),
+        (lambda r: tdct.Target((0.0, 0.0, 0.1), axes="yw"), ["axes = 'yw'"]),
+        (lambda r: tdct.Bounds(tension=(10.0, 2.0)), ["bounds.tension", "lowest <= highest"]),
+        (lambda r: tdct.Bounds(tension=(-1.0, 10.0)), ["bounds.tension", "[0, inf] N"]),
+        (
+            lambda r: tdct.inverse_kinematics(r, (0.0, 0.0, 0.1), bounds=tdct.Bounds(insertion=(0.0, 0.2))),
+            ["bounds.insertion", "0.16"],
+        ),
+        (lambda r: tdct.inverse_kinematics(r, (0.0, 0.0, 0.1), objective="softest"), ["objective = 'softest'", "stiffness"]),
+        (lambda r: tdct.inverse_kinematics(r, (0.0, 0.0, 0.1), tendons=(0, 5)), ["tendons", "[1, 4]"]),
+        (
+            lambda r: tdct.inverse_kinematics(r, (0.0, 0.0, 0.1), objective="stiffness", direction=(0, 0, 0)),
+            ["direction", "nonzero"],
+        ),
+    ],
+)
+def test_bad_ik_input_names_field_value_and_range(robot, make, words):
+    with pytest.raises(ValueError) as e:
+        make(robot)
+    for w in words:
+        assert w in str(e.value), str(e.value)
+
+
+def test_cli_ik_reaches_prints_json_and_exits_by_status(capsys, robot):
+    tip = np.asarray(tdct.solve(robot, tdct.Actuation((5.0, 0, 0, 0), 0.04), tdct.TipLoad.from_mass(0.01)).tip_position)
+    target = ",".join(f"{1e3 * x:.9f}" for x in tip)
+    args = ["ik", "--target-mm", target, "--tendons", "1,3", "--tip-mass-g", "10", "--objective", "tension", "--json"]
+    assert main(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "converged" and out["position_error_mm"] < 1e-6
+    assert set(out) >= {"tensions_N", "insertion_mm", "tip_position_mm", "tip_angle_deg", "compliance_along_direction_mm_per_N"}
+    np.testing.assert_allclose(out["tip_position_mm"], 1e3 * tip, atol=1e-6)
+    assert out["tensions_N"][2] < 1e-6  # least tension: no co-contraction of tendon 3 against tendon 1
+    assert main(["ik", "--target-mm", "0,0,300", "--tendons", "1", "--json"]) == 1  # unreachable: nearest pose printed
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "target unreachable" and out["position_error_mm"] > 100
+    assert main(["ik", "--target-mm", "0,0,nan"]) == 2
+    assert main(["ik", "--target-mm", "0,0,100", "--tendons", "5"]) == 2
+    assert "--tendons 5 is outside the allowed range [1, 4]" in capsys.readouterr().err
