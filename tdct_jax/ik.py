@@ -39,10 +39,9 @@ from .batch import Kernel, default_chunk_size, lanes_per_call, run_batched
 from .checks import as_array, check_choice, check_integer, check_range, is_concrete
 from .linalg import solve_spd
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
-from .mechanics import compliance_and_solution
 from .options import DEFAULT_SOLVER, SolverOptions
 from .robot import Robot
-from .shooting import force_scale, scaled, shoot
+from .shooting import compliance_at, force_scale, scaled, shoot
 from .solve import Solution, check_inputs, solution_and_compliance, tip_angle
 from .tree import pytree, set_fields, static
 
@@ -321,11 +320,10 @@ def evaluate(v, guess, prob: Problem, plan: Plan) -> Evaluation:
 
     def f(v):
         act = actuation_of(v, prob, plan)
-        options = dict(gravity=prob.gravity, solver=prob.solver, guess=guess, throw=False)
-        if plan.objective == "stiffness":
-            C, sol = compliance_and_solution(prob.robot, act, prob.load, **options)
-        else:
-            sol, C = solution_and_compliance(prob.robot, act, prob.load, prob.gravity, guess, prob.solver)
+        sol, C = solution_and_compliance(prob.robot, act, prob.load, prob.gravity, guess, prob.solver)
+        if plan.objective == "stiffness":  # C again, from the root as a differentiable function of it
+            x = scaled(prob.robot, sol.base_wrench, force_scale(prob.robot, act, prob.load, prob.gravity))
+            C = compliance_at(prob.robot, act, prob.load, prob.gravity, prob.solver, x)
         e = task_residual(sol.tip_position, sol.tip_rotation, prob.target, prob.robot.length)
         phi = jnp.zeros(()) if plan.objective is None else objective_value(sol, C, act, prob, plan)
         return (e, phi), (e, phi, sol.base_wrench, sol.result)
@@ -341,10 +339,9 @@ MU_START = 1e-3
 """Initial Levenberg-Marquardt damping (relative to the diagonal of G^T G)."""
 MU_GIVE_UP = 1e10
 """Damping at which a phase stops: no step it could take lowers its merit."""
-STEP_TOL = 1e-11
-"""Phase 2 has converged when its step of the scaled inputs is below this (max norm) on the target."""
-BOUNDARY_WEIGHT = 1e6
-"""Weight of the tip boundary residual against the task residual in the augmented merit."""
+KKT_TOL = 1e-7
+"""Phase 2 has converged on the target when the projected gradient of the Lagrangian is below this
+relative to the objective's gradient (``_kkt_residual``, scaled inputs)."""
 STALLED = 1e-10
 """An accepted phase-1 step that lowers |e|^2 by less than this, relatively, ends phase 1."""
 STATIONARY = 1e-7
@@ -453,9 +450,7 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> R
         return F, (dx0, K, Ev + Ex @ K, e + Ex @ dx0)
 
     def merit(F):
-        """The boundary residual weighs far more than the task: steps that restore r(x, v) = 0 are
-        taken even where they move e the wrong way."""
-        return jnp.where(jnp.all(jnp.isfinite(F)), BOUNDARY_WEIGHT * F[:6] @ F[:6] + F[6:] @ F[6:], jnp.inf)
+        return jnp.where(jnp.all(jnp.isfinite(F)), F @ F, jnp.inf)
 
     def cond(c):
         return ~c[-1]
@@ -469,8 +464,11 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> R
         linear = e + G @ s  # the model: Newton takes r to 0, Gauss-Newton e to this
         damped = _damping(mu, nu, merit(F) - merit(F_t), merit(F) - linear @ linear)
         mu, nu = jnp.where(first, mu, damped[0]), jnp.where(first, nu, damped[1])
-        better = first | damped[2]
-        stalled = ~first & better & (merit(F) - merit(F_t) <= STALLED * merit(F))
+        # while the boundary residual is off, e is not yet the task error: a step that halves r is
+        # taken even where it moves e the wrong way
+        restores = (jnp.max(jnp.abs(F[:6])) > prob.solver.tol) & (jnp.linalg.norm(F_t[:6]) <= 0.5 * jnp.linalg.norm(F[:6]))
+        better = first | damped[2] | restores
+        stalled = ~first & damped[2] & (merit(F) - merit(F_t) <= STALLED * merit(F))
         z, F, lin = _where(better, (trial, F_t, lin_t), (z, F, lin))
         code, done = _reach_status(F[6:], lin[2], z[6:], mu, it, prob, tol, max_steps, stalled)
         # reached only with the boundary residual converged too; stationary (UNREACHABLE) once it is
@@ -507,27 +505,41 @@ def optimise(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
         return ~c[-1]
 
     def body(c):
-        v, ev, H, s, lam, scale, rho, mu, it, code, _ = c
+        v, ev, H, s, lam, scale, rho, mu, corrected, it, code, _ = c
         first = it == 0
         trial = evaluate(v + s, ev.wrench, prob, plan)
         scale = jnp.where(first, jnp.maximum(jnp.abs(trial.phi), 1e-300), scale)
-        better = first | (merit(trial, scale, rho) <= merit(ev, scale, rho) - 1e-15 * jnp.abs(merit(ev, scale, rho)))
+        m, m_t = merit(ev, scale, rho), merit(trial, scale, rho)
+        # at the optimum the merit stops resolving progress (round-off); there a step is taken
+        # when it brings the first-order optimality residual down
+        flat = (jnp.abs(m_t - m) <= 1e-13 * jnp.abs(m)) & (jnp.max(jnp.abs(trial.e)) <= tol)
+        sharper = _kkt_residual(trial.dphi / scale, trial.G, v + s, prob) < _kkt_residual(ev.dphi / scale, ev.G, v, prob)
+        better = first | (m_t <= m - 1e-15 * jnp.abs(m)) | (flat & sharper)
         y = (trial.dphi - ev.dphi) / scale + (trial.G - ev.G).T @ lam
-        H = jnp.where(better & ~first, _damped_bfgs(H, s, y), H)
+        H = jnp.where(better & ~first & ~corrected, _damped_bfgs(H, s, y), H)
+        # a rejected step is tried once more with a second-order correction back onto the task
+        # manifold, c = least-squares solution of e(v + s) + G(v + s) c = 0 (the Maratos effect:
+        # on a curved manifold the l1 merit rejects good SQP steps)
+        correct = ~better & ~corrected & (trial.code == status.SUCCESS)
+        c = box_qp(trial.G.T @ trial.G + 1e-12 * jnp.eye(n), trial.G.T @ trial.e, prob.lo - v - s, prob.hi - v - s)[0]
         v, ev = _where(better, (v + s, trial), (v, ev))
-        mu = jnp.where(first, mu, jnp.where(better, jnp.where(mu < 1e-10, 0.0, mu / 10), jnp.maximum(10 * mu, 1e-6)))
+        mu = jnp.where(first | correct, mu, jnp.where(better, jnp.where(mu < 1e-10, 0.0, mu / 10), jnp.maximum(10 * mu, 1e-6)))
         # the next step, from the QP at the current point
-        s, lam, ok = box_qp(H + mu * jnp.eye(n), ev.dphi / scale, prob.lo - v, prob.hi - v, J=ev.G, c=-ev.e)
-        s = jnp.where(ok, s, _lm_step(ev.G, ev.e, jnp.maximum(mu, MU_START), prob.lo - v, prob.hi - v))
-        lam = jnp.where(ok, lam, 0.0)
+        s_qp, lam_qp, ok = box_qp(H + mu * jnp.eye(n), ev.dphi / scale, prob.lo - v, prob.hi - v, J=ev.G, c=-ev.e)
+        s_qp = jnp.where(ok, s_qp, _lm_step(ev.G, ev.e, jnp.maximum(mu, MU_START), prob.lo - v, prob.hi - v))
+        lam = jnp.where(correct, lam, jnp.where(ok, lam_qp, 0.0))
+        s = jnp.where(correct, s + c, s_qp)
         rho = jnp.maximum(rho, 2 * jnp.max(jnp.abs(lam), initial=0.0) + 1e-6)
-        converged = ok & (mu == 0) & (jnp.max(jnp.abs(s)) <= STEP_TOL) & (jnp.max(jnp.abs(ev.e)) <= tol)
+        g = ev.dphi / scale
+        converged = (
+            ~correct & (_kkt_residual(g, ev.G, v, prob) <= KKT_TOL * jnp.max(jnp.abs(g))) & (jnp.max(jnp.abs(ev.e)) <= tol)
+        )
         failed = ev.code != status.SUCCESS
         code = jnp.where(
             converged, status.SUCCESS, jnp.where(mu >= MU_GIVE_UP, status.CONTINUATION_EXHAUSTED, status.OUTER_LIMIT)
         )
         done = converged | failed | (it >= max_steps) | (mu >= MU_GIVE_UP)
-        return v, ev, H, s, lam, scale, rho, mu, it + 1, jnp.where(failed, ev.code, code).astype(jnp.int32), done
+        return v, ev, H, s, lam, scale, rho, mu, correct, it + 1, jnp.where(failed, ev.code, code).astype(jnp.int32), done
 
     start = _unset(lambda v: evaluate(v, wrench0, prob, plan), v0)._replace(wrench=wrench0)
     m = prob.target.size
@@ -541,12 +553,24 @@ def optimise(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
         1.0,
         jnp.asarray(1.0),
         jnp.asarray(0.0),
+        False,
         0,
         jnp.int32(status.OUTER_LIMIT),
         False,
     )
     v, ev, *_, it, code, _ = lax.while_loop(cond, body, init)
     return Reach(v, ev.wrench, ev.e, it - 1, code)
+
+
+def _kkt_residual(g, G, v, prob: Problem):
+    """First-order optimality of min phi s.t. e = 0 and the bounds, at v: the Lagrangian's gradient
+    g + G^T lam (lam least squares on the inputs off their bounds), on the inputs it could move:
+    off their bounds, or at one with the gradient pointing into the box."""
+    inside = (v > prob.lo) & (v < prob.hi)
+    lam = -jnp.linalg.lstsq((G * inside[None, :]).T, g * inside)[0]
+    r = g + G.T @ lam
+    movable = jnp.where(v <= prob.lo, r < 0, jnp.where(v >= prob.hi, r > 0, True))
+    return jnp.max(jnp.abs(jnp.where(movable, r, 0.0)))
 
 
 def _damped_bfgs(H, s, y):

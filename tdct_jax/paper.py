@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .calibrate import levenberg_marquardt
+from .ik import Bounds, Target, inverse_kinematics
 from .loads import Actuation, TipLoad
 from .manipulation import capacity, load_capacity, optimal_insertion
 from .mechanics import compliance, compliance_ellipsoid
@@ -192,3 +193,126 @@ def fit_load_capacities(
 def calibration_conditions(robot: Robot, tensions=CALIBRATION_TENSIONS) -> list[Actuation]:
     """Sec. III.B's calibration protocol: tendon 1 alone at five tensions, no tube, no tip load."""
     return [Actuation(t, 0.0) for t in tendon1(robot, tensions)]
+
+
+# ----------------------------------------------------------------------------- Secs. V.A and V.B as inverse kinematics
+
+VB_HEIGHTS = tuple(MM * y for y in (0, 20, 40, 60, 80))
+"""Sec. V.B study: fixed tip heights y [m] in the z-y plane."""
+VB_INSERTIONS = tuple(MM * d for d in range(0, 161, 10))
+"""Sec. V.B study: the tube depths [m] at which tendon 1 is re-solved to hold each height."""
+VA_HEIGHTS = tuple(MM * y for y in (-60, -40, -20, 0, 20))
+"""Sec. V.A as IK: tip heights [m] to reach with 50 g at the tip, stiffest first."""
+VA_MASS = 50 * G
+MAP_Z = tuple(MM * z for z in range(60, 161, 10))
+MAP_Y = tuple(MM * y for y in range(0, 121, 10))
+"""Stiffness map: a grid of in-plane tip targets (z, y) [m]."""
+
+
+class AngleFamily(NamedTuple):
+    """Sec. V.B: at each fixed tip height (rows), the tip angle [rad], tendon-1 tension [N] and
+    whether the height was reached, as the tube goes in (columns: ``insertions`` [m]).
+    Insertion 0 is the tendon-only robot: one angle per height; the tube makes it a range."""
+
+    heights: np.ndarray
+    insertions: np.ndarray
+    tip_angle: np.ndarray
+    tension: np.ndarray
+    reached: np.ndarray
+
+
+def tip_angle_family(
+    robot: Robot, heights=VB_HEIGHTS, insertions=VB_INSERTIONS, tension: float = FIG8A_TENSION, **options
+) -> AngleFamily:
+    """Sec. V.B: how far the tube lets the tip angle vary while the tip holds a height (tendon 1
+    re-solved by inverse kinematics at every depth, up to ``tension`` [N])."""
+    targets = Target(np.column_stack([np.zeros(len(heights)), heights, np.zeros(len(heights))]), axes="y")
+    bounds = Bounds(tension=(0.0, tension))
+    rows = []
+    for d in insertions:
+        r = inverse_kinematics(robot, targets, tendons=(1,), insertion=d, bounds=bounds, throw=False, **options)
+        rows.append((np.asarray(r.tip_angle), np.asarray(r.actuation.tensions)[:, 0], np.asarray(r.result) == 0))
+    angle, tau, ok = (np.stack(x, axis=1) for x in zip(*rows, strict=True))
+    return AngleFamily(np.asarray(heights), np.asarray(insertions), angle, tau, ok)
+
+
+class StiffestReach(NamedTuple):
+    """Sec. V.A as IK: for each target tip height (with ``mass`` [kg] at the tip), the stiffest
+    actuation (tendon 1 [N], insertion [m]) and its compliance along -y [m/N], beside the
+    tendon-only actuation reaching the same height (insertion 0) and its compliance."""
+
+    heights: np.ndarray
+    mass: float
+    tension: np.ndarray
+    insertion: np.ndarray
+    compliance: np.ndarray
+    reached: np.ndarray
+    tendon_only_tension: np.ndarray
+    tendon_only_compliance: np.ndarray
+
+
+def stiffest_reach(
+    robot: Robot, heights=VA_HEIGHTS, mass: float = VA_MASS, tension: float = FIG8A_TENSION, **options
+) -> StiffestReach:
+    """Sec. V.A done as inverse kinematics: reach each tip height holding ``mass`` with tendon 1
+    (at most ``tension`` [N]) and the tube, the stiffest way along -y."""
+    targets = Target(np.column_stack([np.zeros(len(heights)), heights, np.zeros(len(heights))]), axes="y")
+    common = dict(load=TipLoad.from_mass(mass), tendons=(1,), bounds=Bounds(tension=(0.0, tension)), throw=False, **options)
+    best = inverse_kinematics(robot, targets, objective="stiffness", direction=(0.0, -1.0, 0.0), **common)
+    plain = inverse_kinematics(robot, targets, insertion=0.0, **common)
+    down = np.array([0.0, -1.0, 0.0])
+
+    def along(result):
+        ok = np.asarray(result.result) == 0
+        CM = [
+            np.asarray(compliance(robot, Actuation(t, d), TipLoad.from_mass(mass), throw=False))
+            for t, d in zip(np.asarray(result.actuation.tensions), np.asarray(result.actuation.insertion), strict=True)
+        ]
+        return np.where(ok, [down @ c @ down for c in CM], np.nan)
+
+    return StiffestReach(
+        np.asarray(heights),
+        mass,
+        np.asarray(best.actuation.tensions)[:, 0],
+        np.asarray(best.actuation.insertion),
+        along(best),
+        np.asarray(best.result) == 0,
+        np.where(np.asarray(plain.result) == 0, np.asarray(plain.actuation.tensions)[:, 0], np.nan),
+        along(plain),
+    )
+
+
+class StiffnessMap(NamedTuple):
+    """Over in-plane tip targets (z, y) [m], tendons 1 and 3 and the tube: the compliance along -y
+    [m/N] of the least-tension solution and of the stiffest one, with their insertions [m]
+    (NaN where unreachable)."""
+
+    z: np.ndarray
+    y: np.ndarray
+    least_tension: np.ndarray
+    stiffest: np.ndarray
+    insertion_least_tension: np.ndarray
+    insertion_stiffest: np.ndarray
+
+
+def stiffness_map(robot: Robot, z=MAP_Z, y=MAP_Y, **options) -> StiffnessMap:
+    """Where, and by how much, choosing the insertion for stiffness (the redundant input: two
+    in-plane coordinates, three inputs) lowers the tip compliance along -y against the
+    least-tension choice."""
+    Z, Y = np.meshgrid(np.asarray(z), np.asarray(y), indexing="ij")
+    targets = Target(np.column_stack([np.zeros(Z.size), Y.ravel(), Z.ravel()]), axes="yz")
+    down = np.array([0.0, -1.0, 0.0])
+    out = {}
+    for name, objective in (("least_tension", "tension"), ("stiffest", "stiffness")):
+        extra = dict(direction=down) if objective == "stiffness" else {}
+        r = inverse_kinematics(robot, targets, tendons=(1, 3), objective=objective, throw=False, **extra, **options)
+        ok = np.asarray(r.result) == 0
+        acts = zip(np.asarray(r.actuation.tensions), np.asarray(r.actuation.insertion), strict=True)
+        c = [down @ np.asarray(compliance(robot, Actuation(t, d), throw=False)) @ down for t, d in acts]
+        out[name] = (
+            np.where(ok, c, np.nan).reshape(Z.shape),
+            np.where(ok, np.asarray(r.actuation.insertion), np.nan).reshape(Z.shape),
+        )
+    return StiffnessMap(
+        np.asarray(z), np.asarray(y), out["least_tension"][0], out["stiffest"][0], out["least_tension"][1], out["stiffest"][1]
+    )

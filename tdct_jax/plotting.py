@@ -327,3 +327,76 @@ def plot_fig14(res, paper_points=None, path: str | Path | None = None):
     ax.grid(alpha=0.3)
     ax.legend(title="tendon 1 tension", fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     return _finish(fig, path)
+
+
+def plot_tip_angle_family(family, path: str | Path | None = None):
+    """Sec. V.B: tip angle against insertion at fixed tip heights (left), and the range of angles
+    each height allows (right), against the single angle of the tendon-only robot."""
+    plt = _pyplot()
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.4))
+    colors = plt.cm.viridis(np.linspace(0, 0.9, len(family.heights)))
+    d_mm = family.insertions * 1e3
+    low, high, plain = [], [], []
+    for k, (h, c) in enumerate(zip(family.heights, colors, strict=True)):
+        ok = family.reached[k]
+        angle = np.degrees(np.where(ok, family.tip_angle[k], np.nan))
+        ax.plot(d_mm, angle, "o-", color=c, ms=3, label=f"y = {h * 1e3:g} mm")
+        low.append(np.nanmin(angle) if ok.any() else np.nan)
+        high.append(np.nanmax(angle) if ok.any() else np.nan)
+        plain.append(angle[0] if ok[0] else np.nan)
+    ax.set(xlabel="tube insertion [mm]", ylabel="tip angle [deg]", title="tip held at a height, tendon 1 re-solved")
+    ax.legend(fontsize=8, title="tip height", title_fontsize=8)
+    ax.grid(alpha=0.3)
+    y_mm = family.heights * 1e3
+    bx.fill_betweenx(y_mm, low, high, color="tab:blue", alpha=0.25, label="reachable with the tube")
+    bx.plot(low, y_mm, color="tab:blue")
+    bx.plot(high, y_mm, color="tab:blue")
+    bx.plot(plain, y_mm, "ks", label="tendon 1 alone (no tube)")
+    bx.set(xlabel="tip angle [deg]", ylabel="tip height y [mm]", title="range of tip angles at each height")
+    bx.legend(fontsize=8, loc="lower right")
+    bx.grid(alpha=0.3)
+    fig.suptitle("Sec. V.B: the tube insertion as a redundant input for the tip angle")
+    return _finish(fig, path)
+
+
+def plot_stiffest_reach(reach, optimum=None, path: str | Path | None = None):
+    """Sec. V.A as IK: the stiffest actuation for each target height (insertion and tension), and
+    its compliance along -y against the tendon-only actuation's. ``optimum``: (highest height [m],
+    its insertion [m]) from the optimal-insertion study, marked."""
+    plt = _pyplot()
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2))
+    y_mm = reach.heights * 1e3
+    ax.plot(np.where(reach.reached, reach.insertion * 1e3, np.nan), y_mm, "o-", color="tab:blue", label="stiffest: insertion")
+    if optimum is not None:
+        ax.plot(optimum[1] * 1e3, optimum[0] * 1e3, "r*", ms=12, label=f"highest reach ({optimum[1] * 1e3:.0f} mm of tube)")
+        ax.axvline(70, color="0.5", ls="--", lw=1, label="paper: 70 mm (grid search)")
+    ax.set(xlabel="tube insertion [mm]", ylabel="target tip height y [mm]", title=f"{reach.mass * 1e3:g} g at the tip")
+    ax.legend(fontsize=8, loc="lower left")
+    ax.grid(alpha=0.3)
+    tx = ax.twiny()
+    tx.plot(np.where(reach.reached, reach.tension, np.nan), y_mm, "s--", color="tab:orange", ms=4)
+    tx.set_xlabel("tendon 1 tension [N] (orange)", color="tab:orange")
+    bx.plot(reach.compliance * 1e3, y_mm, "o-", color="tab:blue", label="stiffest (tendon 1 + tube)")
+    bx.plot(reach.tendon_only_compliance * 1e3, y_mm, "s-", color="0.4", label="tendon 1 alone (no tube)")
+    bx.set(xlabel="tip compliance along -y [mm/N]", ylabel="target tip height y [mm]", title="what the tube buys in stiffness")
+    bx.legend(fontsize=8)
+    bx.grid(alpha=0.3)
+    fig.suptitle("Sec. V.A as inverse kinematics: reach a height with the stiffest actuation")
+    return _finish(fig, path)
+
+
+def plot_stiffness_map(stiffness, path: str | Path | None = None):
+    """Tip compliance along -y over in-plane targets: least-tension solution, and how much lower the
+    stiffest (insertion chosen for stiffness) is [%]."""
+    plt = _pyplot()
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.4))
+    Z, Y = np.meshgrid(stiffness.z * 1e3, stiffness.y * 1e3, indexing="ij")
+    im = ax.pcolormesh(Z, Y, stiffness.least_tension * 1e3, shading="nearest", cmap="magma_r")
+    fig.colorbar(im, ax=ax, label="compliance along -y [mm/N]")
+    ax.set(xlabel="target z [mm]", ylabel="target y [mm]", title="least-tension solution", aspect="equal")
+    gain = 100 * (1 - stiffness.stiffest / stiffness.least_tension)
+    im = bx.pcolormesh(Z, Y, gain, shading="nearest", cmap="viridis")
+    fig.colorbar(im, ax=bx, label="compliance lower by [%]")
+    bx.set(xlabel="target z [mm]", ylabel="target y [mm]", title="stiffest solution against it", aspect="equal")
+    fig.suptitle("Tendons 1 and 3 with the tube: where redundancy buys stiffness (white: unreachable)")
+    return _finish(fig, path)

@@ -29,6 +29,9 @@ FULL = dict(
     fig13_curve=33,
     fig14_insertions=paper.FIG9_INSERTIONS,
     table3=(paper.TABLE3_TENSIONS, paper.TABLE3_INSERTIONS, paper.TABLE3_MASSES),
+    vb=(paper.VB_HEIGHTS, paper.VB_INSERTIONS),
+    va_heights=paper.VA_HEIGHTS,
+    stiffness_map=(paper.MAP_Z, paper.MAP_Y),
     fit=True,
 )
 """The paper's grids."""
@@ -42,9 +45,13 @@ QUICK = dict(
     fig13_curve=9,
     fig14_insertions=(0.0, 0.07, 0.15),
     table3=((0.0, 10.0), (0.0, 0.12), (0.0, 0.05)),
+    vb=((0.0, 0.04), (0.0, 0.08, 0.16)),
+    va_heights=(-0.04, 0.0),
+    stiffness_map=None,
     fit=False,
 )
-"""Coarse grids (for CI and a first look); the ten load capacities are computed in full either way."""
+"""Coarse grids (for CI and a first look); the ten load capacities are computed in full either way;
+no stiffness map and no parameter fit."""
 
 
 def _relative(model: float, reference: float) -> float:
@@ -79,6 +86,12 @@ def reproduce(
         ("Fig. 14 and Sec. V.A: load capacity", "fig14"),
         ("Sec. III.B: bending-angle range over the Table III conditions", "table3"),
     ]
+    steps += [
+        ("Sec. V.B: the tip angles the tube allows at fixed tip heights (inverse kinematics)", "vb"),
+        ("Sec. V.A as inverse kinematics: the stiffest way to reach a height with 50 g", "va_ik"),
+    ]
+    if grids["stiffness_map"]:
+        steps.append(("Stiffness map: least tension against stiffest, tendons 1 and 3 with the tube", "stiffness_map"))
     if grids["fit"]:
         steps.append(("Sec. V.A: fit of tendon offset and density to the ten load capacities", "fit"))
 
@@ -204,7 +217,60 @@ def _fit(robot, grids, out, opts, say):
     return rows
 
 
-_STUDIES = dict(fig8a=_fig8a, fig9=_fig9, fig10=_fig10, fig11=_fig11, fig13=_fig13, fig14=_fig14, table3=_table3, fit=_fit)
+def _vb(robot, grids, out, opts, say):
+    heights, insertions = grids["vb"]
+    family = paper.tip_angle_family(robot, heights, insertions)
+    plotting.plot_tip_angle_family(family, out / "fig16_tip_angle_redundancy.png")
+    rows = []
+    for k, h in enumerate(family.heights):
+        ok = family.reached[k]
+        angles = np.degrees(family.tip_angle[k][ok])
+        note = f"tendon 1 up to 10 N, tube 0-{1e3 * family.insertions[-1]:g} mm; {ok.sum()} of {ok.size} depths reach it"
+        spread = angles.max() - angles.min() if ok.any() else np.nan
+        rows.append(_row(f"tip-angle range at tip height {1e3 * h:g} mm", spread, None, "deg", note))
+    return rows
+
+
+def _va_ik(robot, grids, out, opts, say):
+    best = paper.fig13_optima(
+        robot, paper.PAPER_OPTIMUM["tension_N"], masses=(paper.VA_MASS,), progress=opts["progress"], throw=False
+    )
+    highest, depth = float(best.height[0]), float(best.insertion[0])
+    heights = np.asarray(tuple(grids["va_heights"]) + (highest - 1e-4,))
+    reach = paper.stiffest_reach(robot, heights)
+    plotting.plot_stiffest_reach(reach, (highest, depth), out / "fig13c_stiffest_reach.png")
+    note = f"IK, stiffest along -y, 0.1 mm below the highest reach {1e3 * highest:.1f} mm with 50 g at 10 N"
+    note += "" if reach.reached[-1] else "; NOT reached"
+    return [
+        _row("insertion for the highest reach, as IK", 1e3 * reach.insertion[-1], paper.PAPER_OPTIMUM["insertion_mm"], "mm", note)
+    ]
+
+
+def _stiffness_map(robot, grids, out, opts, say):
+    z, y = grids["stiffness_map"]
+    m = paper.stiffness_map(robot, z, y)
+    plotting.plot_stiffness_map(m, out / "stiffness_map.png")
+    gain = 100 * (1 - m.stiffest / m.least_tension)
+    note = f"{np.isfinite(gain).sum()} of {gain.size} in-plane targets reachable with tendons 1, 3 and the tube"
+    return [
+        _row("stiffest against least tension: largest compliance reduction", np.nanmax(gain), None, "%", note),
+        _row("stiffest against least tension: median compliance reduction", np.nanmedian(gain), None, "%", note),
+    ]
+
+
+_STUDIES = dict(
+    fig8a=_fig8a,
+    fig9=_fig9,
+    fig10=_fig10,
+    fig11=_fig11,
+    fig13=_fig13,
+    fig14=_fig14,
+    table3=_table3,
+    vb=_vb,
+    va_ik=_va_ik,
+    stiffness_map=_stiffness_map,
+    fit=_fit,
+)
 
 
 def _markdown(summary: dict) -> str:

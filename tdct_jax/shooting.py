@@ -21,7 +21,7 @@ from .newton import continuation
 from .options import SolverOptions
 from .robot import Robot
 from .segments import E3, Segment, State, paper_transition, vector_field
-from .so3 import orthonormalize
+from .so3 import orthonormalize, rotation_columns
 
 
 def segments(robot: Robot, act: Actuation, solver: SolverOptions) -> tuple[Segment, Segment]:
@@ -161,3 +161,24 @@ def _jacobian_at_root_jvp(primals, tangents):
         return jax.jacfwd(lambda x: residual(robot, act, load, gravity, solver, x))(x)
 
     return J, jax.jvp(jacobian, (robot, act, load, gravity, x), (*tangents[:4], tangents[5]))[1]
+
+
+def tip_compliance(robot: Robot, R_tip, J_res, J_p, J_R, F_c):
+    """The 6x6 tip compliance d(tip position, tip rotation vector) / d(F_e, M_e) (eq. 41) from the
+    Jacobians of the residual and of the tip pose (p, R) with respect to the scaled unknowns at
+    the root: the tip load enters only the residual, d res / d(F_e, M_e) = -diag(1 / F_c, 1 / (F_c L))."""
+    dx_dw = jnp.linalg.solve(J_res, jnp.diag(jnp.repeat(jnp.stack([1 / F_c, 1 / (F_c * robot.length)]), 3)))
+    return jnp.concatenate([J_p @ dx_dw, rotation_columns(J_R @ dx_dw, R_tip)])
+
+
+def compliance_at(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x):
+    """``tip_compliance`` at the scaled unknowns x (a root), its Jacobians taken here by forward
+    mode: an ordinary differentiable function of every input and of x."""
+    F_c = force_scale(robot, act, load, gravity)
+
+    def pose(x):
+        res, tip = shoot(robot, act, load, gravity, solver, x, F_c)
+        return (res, (tip.p, tip.R)), tip.R
+
+    (J_res, (J_p, J_R)), R = jax.jacfwd(pose, has_aux=True)(x)
+    return tip_compliance(robot, R, J_res, J_p, J_R, F_c)

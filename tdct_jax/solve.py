@@ -13,8 +13,7 @@ from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
 from .robot import Robot
 from .segments import Segment, State, rod_force, strains
-from .shooting import force_scale, root, segments, shoot
-from .so3 import rotation_columns
+from .shooting import force_scale, root, segments, shoot, tip_compliance
 from .tree import pytree
 
 
@@ -96,10 +95,7 @@ def solution_and_compliance(robot: Robot, act: Actuation, load: TipLoad, gravity
     F_c = force_scale(robot, act, load, gravity)
     res, ys = shoot(robot, act, load, gravity, solver, x, F_c, path=True)
     sol = _assemble(robot, act, solver, ys, res, info)
-    # The tip load enters only the residual: d res / d(F_e, M_e) = -diag(1 / F_c, 1 / (F_c L)).
-    dx_dw = jnp.linalg.solve(J_res, jnp.diag(jnp.repeat(jnp.stack([1 / F_c, 1 / (F_c * robot.length)]), 3)))
-    C = jnp.concatenate([J_p @ dx_dw, rotation_columns(J_R @ dx_dw, sol.tip_rotation)])
-    return sol, C
+    return sol, tip_compliance(robot, sol.tip_rotation, J_res, J_p, J_R, F_c)
 
 
 def _node_quantities(back: Segment, sil: Segment, y: State, in_backbone):
