@@ -29,6 +29,7 @@ SCRIPTS = (
     ("sweep_throughput.py", {}),
     ("sweep_throughput.py", {"JAX_NUM_CPU_DEVICES": "2"}),  # both cores on one sweep
     ("durable_sweep.py", {}),
+    ("ik.py", {}),
     ("gpu_throughput.py", {}),  # writes nothing where JAX sees no GPU
 )
 """(script, extra environment) in the order they run."""
@@ -158,6 +159,11 @@ def summary(suffix: str, seconds: dict) -> str:
                 if r["kind"] == "batch"
             ],
         )
+    ik = _load("ik", suffix)
+    if ik:
+        lines += [f"Inverse kinematics against the forward solve ({ik['date']}, load {ik['load'][0]:.1f}):", ""]
+        lines += _table(("what", "median"), [(k, f"{v:.3f} ms") for k, v in ik["median_ms"].items()])
+        lines += _table(("ratio", "measured", "goal"), [(k, f"{v:.2f}", ik["goals"].get(k, "")) for k, v in ik["ratios"].items()])
     if gpu:
         lines += [f"On the GPU ({gpu['device']}, {gpu['date']}, jax {gpu['jax']}, {gpu['steps']} steps):", ""]
         lines += _table(

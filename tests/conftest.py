@@ -2,6 +2,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 
 import jax
@@ -9,8 +10,17 @@ import numpy as np
 import pytest
 
 import tdct_jax as tdct
+from tdct_jax.cli import enable_compile_cache
 
-os.environ["TDCT_COMPILE_CACHE"] = "0"  # tests compile afresh: no persistent cache from the CLI, here or in subprocesses
+# One compilation cache for the whole test session, fresh each session: a program compiled once (a
+# solver configuration, an IK plan) is loaded, not compiled again, by the other pytest workers and
+# by the subprocesses the tests start (CLI runs, the notebook's kernel), which inherit these.
+SESSION_CACHE = os.environ.setdefault("TDCT_TEST_XLA_CACHE", tempfile.mkdtemp(prefix="tdct-test-xla-"))
+os.environ["TDCT_COMPILE_CACHE"] = SESSION_CACHE
+os.environ["JAX_COMPILATION_CACHE_DIR"] = SESSION_CACHE
+os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
+os.environ["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"] = "-1"
+enable_compile_cache(SESSION_CACHE)
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
 

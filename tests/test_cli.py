@@ -86,12 +86,11 @@ def test_compliance_verb_matches_the_api(capsys, tmp_path, robot):
     assert "steps" in capsys.readouterr().err
 
 
-def test_cli_compile_cache_is_on_by_default_and_off_in_tests_and_sweeps_get_every_core(tmp_path, monkeypatch):
-    assert main(["solve", "--insertion-mm", "200"]) == 2  # the cache is set up before the input is read
-    assert jax.config.jax_compilation_cache_dir is None  # conftest's TDCT_COMPILE_CACHE=0
+def test_cli_compile_cache_is_on_by_default_and_sweeps_get_every_core(tmp_path, monkeypatch):
+    session = jax.config.jax_compilation_cache_dir  # conftest's: one cache for the test session
     monkeypatch.setenv("TDCT_COMPILE_CACHE", str(tmp_path / "unused"))
     assert main(["solve", "--no-compile-cache", "--insertion-mm", "200"]) == 2
-    assert jax.config.jax_compilation_cache_dir is None
+    assert jax.config.jax_compilation_cache_dir == session and not (tmp_path / "unused").exists()
     script = textwrap.dedent(
         """
         import jax
@@ -102,7 +101,9 @@ def test_cli_compile_cache_is_on_by_default_and_off_in_tests_and_sweeps_get_ever
         print(jax.device_count())
         """
     )
-    env = {k: v for k, v in os.environ.items() if k not in ("TDCT_COMPILE_CACHE", "JAX_NUM_CPU_DEVICES")}
+    env = {
+        k: v for k, v in os.environ.items() if k not in ("TDCT_COMPILE_CACHE", "JAX_NUM_CPU_DEVICES", "JAX_COMPILATION_CACHE_DIR")
+    }
     run = subprocess.run(
         [sys.executable, "-c", script], env=dict(env, XDG_CACHE_HOME=str(tmp_path)), capture_output=True, text=True, timeout=120
     )

@@ -16,4 +16,4 @@ def test_tour_notebook_runs(monkeypatch):
         nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(ROOT / "notebooks")}}
     ).execute()
     images = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs if "image/png" in o.get("data", {})]
-    assert len(images) >= 5, f"expected a figure from each plotting cell, got {len(images)}"
+    assert len(images) >= 7, f"expected a figure from each plotting cell, got {len(images)}"
