@@ -1,6 +1,7 @@
 """The batch engine: a per-point function run as one compiled ``jax.vmap`` over chunks of points,
-sharded over this process's devices, with a progress bar. No physics: sweeps, load capacities and
-optimal insertions bring their own per-point kernels."""
+sharded over this process's devices, with a progress bar; lanes that have not converged after a
+short first pass are solved again apart, so that they do not hold up their chunk. No physics:
+sweeps, load capacities and optimal insertions bring their own per-point kernels."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from jax.sharding import Mesh
 from jax.sharding import PartitionSpec as P
 from tqdm import tqdm
 
+from . import status
 from .checks import check_integer
 
 CHUNK_SIZES = {"cpu": 64, "gpu": 8192}
@@ -21,6 +23,14 @@ smaller batch rounds up to a power of two; other platforms take the cpu value). 
 fastest on one device of the 2-core CPU (664 solves/s against 569, 650 and 440 at 16, 256 and
 1,024; benchmarks/sweep_throughput.py). gpu: provisional, near the best batch of a batch-last
 prototype on one H100 (benchmarks/README.md), until benchmarks/gpu_throughput.py measures it."""
+FIRST_PASS = 8
+"""Newton steps each lane gets in a chunk's first pass, without load continuation, for kernels
+that allow it (``Kernel.retire``). A vmapped loop runs until its slowest lane stops, so lanes that
+need more (or fail) would hold every lane of their chunk through all continuation stages; instead
+they are solved again from the start with the full solver, RETRY_LANES at a time, and their
+answers are the single solve's. None: one pass. benchmarks/sweep_throughput.py measures both."""
+RETRY_LANES = 8
+"""Configurations per compiled call of the second pass."""
 AXIS = "batch"
 """Name of the device-mesh axis the batch is sharded over."""
 
@@ -32,11 +42,15 @@ class Kernel:
     ``function(base, point, kernel)`` returns a dict of arrays for one point; ``base`` is the
     pytree every point shares (robot, actuation, load, gravity, solver options, ...).
     ``options`` are hashable settings the function reads (e.g. which outputs to return).
+    ``retire``: the function returns a per-point ``result`` code and, given the option
+    ``first_pass`` (a number of Newton steps), solves with at most that many and no load
+    continuation; the engine then runs it in two passes (``FIRST_PASS``).
     """
 
     function: Callable
     options: tuple = ()
     mesh: Mesh | None = None
+    retire: bool = False
 
     def option(self, name: str, default=None):
         return dict(self.options).get(name, default)
@@ -104,10 +118,27 @@ def iter_batched(
     chunk = chunk_lanes(kernel, n, chunk_size)
     # one device: commit the points to it, so jit runs there and not on the default device
     device = kernel.mesh.devices.flat[0] if kernel.mesh is not None and kernel.mesh.size == 1 else None
+    two_pass = kernel.retire and FIRST_PASS is not None
+    first = dataclasses.replace(kernel, options=kernel.options + (("first_pass", FIRST_PASS),)) if two_pass else kernel
+
+    def run(kernel, rows, lanes):
+        index = np.concatenate([rows, np.full(lanes - len(rows), rows[-1])])
+        chunk_points = {k: v[index] for k, v in points.items()}
+        if device is not None:
+            chunk_points = jax.device_put(chunk_points, device)
+        return _run_chunk(base, chunk_points, kernel)
 
     def fetched(start, out):
         m = min(chunk, n - start)
-        out = {k: v[:m] for k, v in jax.device_get(out).items()}
+        out = {k: np.array(v[:m]) for k, v in jax.device_get(out).items()}  # writable: retried lanes go in
+        if two_pass:
+            again = np.flatnonzero(out["result"] != status.SUCCESS)
+            lanes = min(chunk, lanes_per_call(RETRY_LANES, RETRY_LANES, 1 if kernel.mesh is None else kernel.mesh.size))
+            for group in np.array_split(again, -(-len(again) // lanes)) if len(again) else ():
+                bar.set_postfix_str(f"solving {len(again)} apart")
+                retried = jax.device_get(run(kernel, start + group, lanes))
+                for k, v in out.items():
+                    v[group] = retried[k][: len(group)]
         bar.update(m * per_point)
         bar.set_postfix_str("")
         return start, out
@@ -120,11 +151,7 @@ def iter_batched(
         bar.set_postfix_str("compiling")
         pending = None
         for start in starts:
-            index = np.minimum(np.arange(start, start + chunk), n - 1)
-            chunk_points = {k: v[index] for k, v in points.items()}
-            if device is not None:
-                chunk_points = jax.device_put(chunk_points, device)
-            out = _run_chunk(base, chunk_points, kernel)  # dispatched: runs while the last chunk is fetched
+            out = run(first, np.arange(start, min(start + chunk, n)), chunk)  # runs while the last chunk is fetched
             if pending is not None:
                 yield fetched(*pending)
             pending = start, out

@@ -41,7 +41,7 @@ from .linalg import solve_spd
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
 from .robot import Robot
-from .shooting import compliance_at, force_scale, scaled, shoot
+from .shooting import compliance_at, force_scale, root, scaled, shoot, unscaled
 from .solve import Solution, check_inputs, solution_and_compliance, tip_angle
 from .tree import pytree, set_fields, static
 
@@ -316,17 +316,25 @@ class Evaluation(NamedTuple):
 
 def evaluate(v, guess, prob: Problem, plan: Plan) -> Evaluation:
     """Forward solve at v (from ``guess``) with the task residual, the objective and their exact
-    derivatives in v (forward mode through the implicitly differentiated solve)."""
+    derivatives in v (forward mode through the implicitly differentiated root). Only the root and
+    one integration to the tip are differentiated: a user's objective, which sees the whole
+    Solution, adds the path."""
 
     def f(v):
         act = actuation_of(v, prob, plan)
-        sol, C = solution_and_compliance(prob.robot, act, prob.load, prob.gravity, guess, prob.solver)
-        if plan.objective == "stiffness":  # C again, from the root as a differentiable function of it
-            x = scaled(prob.robot, sol.base_wrench, force_scale(prob.robot, act, prob.load, prob.gravity))
-            C = compliance_at(prob.robot, act, prob.load, prob.gravity, prob.solver, x)
-        e = task_residual(sol.tip_position, sol.tip_rotation, prob.target, prob.robot.length)
+        problem = (prob.robot, act, prob.load, prob.gravity)
+        F_c = force_scale(*problem)
+        if callable(plan.objective):
+            sol = solution_and_compliance(*problem, guess, prob.solver)[0]
+            x, code, p, R = scaled(prob.robot, sol.base_wrench, F_c), sol.result, sol.tip_position, sol.tip_rotation
+        else:
+            sol, (x, info) = None, root(*problem, guess, prob.solver)
+            tip = shoot(*problem, prob.solver, x, F_c)[1]
+            code, p, R = info.result, tip.p, tip.R
+        e = task_residual(p, R, prob.target, prob.robot.length)
+        C = compliance_at(*problem, prob.solver, x) if plan.objective == "stiffness" else None
         phi = jnp.zeros(()) if plan.objective is None else objective_value(sol, C, act, prob, plan)
-        return (e, phi), (e, phi, sol.base_wrench, sol.result)
+        return (e, phi), (e, phi, unscaled(prob.robot, x, F_c), code)
 
     (G, dphi), (e, phi, wrench, code) = jax.jacfwd(f, has_aux=True)(v)
     return Evaluation(e, G, phi, dphi, wrench, code)
@@ -342,6 +350,10 @@ MU_GIVE_UP = 1e10
 KKT_TOL = 1e-7
 """Phase 2 has converged on the target when the projected gradient of the Lagrangian is below this
 relative to the objective's gradient (``_kkt_residual``, scaled inputs)."""
+DRIFT = 1e-3
+"""Phase 2 takes no step whose task residual exceeds this (about 0.16 mm of position on the
+default robot) unless it is already further away: the exact penalty alone lets a large step trade
+the target for the objective where the reachable set is thin."""
 STALLED = 1e-10
 """An accepted phase-1 step that lowers |e|^2 by less than this, relatively, ends phase 1."""
 STATIONARY = 1e-7
@@ -484,8 +496,7 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> R
     F0, lin0 = _unset(linearise, z0)
     init = (z0, F0, lin0, jnp.zeros_like(v0), jnp.asarray(MU_START), jnp.asarray(2.0), 0, jnp.int32(status.OUTER_LIMIT), False)
     z, F, _, _, _, _, it, code, _ = lax.while_loop(cond, body, init)
-    wrench = jnp.concatenate([z[:3] * F_s, z[3:6] * F_s * L])
-    return Reach(z[6:], wrench, F[6:], it - 1, code)
+    return Reach(z[6:], unscaled(robot, z[:6], F_s), F[6:], it - 1, code)
 
 
 # ----------------------------------------------------------------------------- phase 2: optimise
@@ -493,8 +504,9 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> R
 
 def optimise(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
     """Phase 2: min phi(v) subject to e(v) = 0 and the bounds, by SQP (damped BFGS Hessian of the
-    Lagrangian, exact active-set subproblems, l1 merit phi / phi_0 + rho |e|_1). The loop's first
-    pass evaluates the start (phi_0 there), so the evaluation is compiled once."""
+    Lagrangian, exact active-set subproblems, l1 merit phi / phi_0 + rho |e|_1, and no step that
+    leaves the task further than ``DRIFT``). The loop's first pass evaluates the start (phi_0
+    there), so the evaluation is compiled once."""
     n = v0.shape[0]
 
     def merit(ev, scale, rho):
@@ -514,7 +526,8 @@ def optimise(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
         # when it brings the first-order optimality residual down
         flat = (jnp.abs(m_t - m) <= 1e-13 * jnp.abs(m)) & (jnp.max(jnp.abs(trial.e)) <= tol)
         sharper = _kkt_residual(trial.dphi / scale, trial.G, v + s, prob) < _kkt_residual(ev.dphi / scale, ev.G, v, prob)
-        better = first | (m_t <= m - 1e-15 * jnp.abs(m)) | (flat & sharper)
+        near = jnp.max(jnp.abs(trial.e)) <= jnp.maximum(jnp.max(jnp.abs(ev.e)), DRIFT)
+        better = first | (near & ((m_t <= m - 1e-15 * jnp.abs(m)) | (flat & sharper)))
         y = (trial.dphi - ev.dphi) / scale + (trial.G - ev.G).T @ lam
         H = jnp.where(better & ~first & ~corrected, _damped_bfgs(H, s, y), H)
         # a rejected step is tried once more with a second-order correction back onto the task
@@ -650,9 +663,10 @@ def find(prob: Problem, v0, wrench0, n_starts, plan: Plan, tol, max_steps) -> Fo
     def body(c):
         k, best, steps = c
         v, guess = candidates[k], jnp.where(k == 0, wrench0, jnp.nan)
-        sol0 = solution_and_compliance(prob.robot, actuation_of(v, prob, plan), prob.load, prob.gravity, guess, prob.solver)[0]
-        r = reach(v, sol0.base_wrench, prob, plan, tol, max_steps)
-        r = r._replace(code=jnp.where(sol0.result == status.SUCCESS, r.code, sol0.result))
+        problem = (prob.robot, actuation_of(v, prob, plan), prob.load, prob.gravity)
+        x, info = root(*problem, guess, prob.solver)
+        r = reach(v, unscaled(prob.robot, x, force_scale(*problem)), prob, plan, tol, max_steps)
+        r = r._replace(code=jnp.where(info.result == status.SUCCESS, r.code, info.result))
         rank, best_rank = (
             jnp.where(x.code == status.SUCCESS, 0, jnp.where(x.code == status.UNREACHABLE, 1, 2)) for x in (r, best)
         )

@@ -15,9 +15,6 @@ MU_START = 1e-5
 MU_STALL = 1e6
 """Damping at which Newton gives up on a stage: 11 rejected steps in a row from the start value;
 the steps it would still take are too short to matter."""
-STAGES = (1, 4, 16)
-"""Load continuation: numbers of equal load stages tried in turn when Newton fails."""
-
 _STALLED = -1  # Newton's own code for a stall; continuation reports it as CONTINUATION_EXHAUSTED
 
 
@@ -84,13 +81,15 @@ def newton(F, x0, J0, tol, max_iter):
     return x, r, J, it - 1, code
 
 
-def continuation(F_at, x0, x_ramp, tol, max_iter) -> Root:
+def continuation(F_at, x0, x_ramp, tol, max_iter, stages=(1, 4, 16)) -> Root:
     """Solves F_at(1)(x)[0] = 0 from x0, ramping the loads in stages when plain Newton fails.
 
     F_at(lam) gives the residual (and outputs, see ``newton``) with every load scaled by lam. The
-    ramps of STAGES are tried in turn: K equal stages lam = 1/K, ..., 1, each started from the last
-    root, the first from lam * x_ramp (a start that is linear in the loads, e.g. the straight rod).
+    ramps of ``stages`` (static) are tried in turn: K equal stages lam = 1/K, ..., 1, each started
+    from the last root, the first from lam * x_ramp (a start that is linear in the loads, e.g. the
+    straight rod), or from x0 when K is the first ramp's 1.
     """
+    ramps = jnp.asarray(stages)
     n = x0.size
     J0 = jax.tree.map(lambda o: jnp.zeros(jnp.shape(o) + (n,)), jax.eval_shape(F_at(1.0), x0))
 
@@ -98,16 +97,18 @@ def continuation(F_at, x0, x_ramp, tol, max_iter) -> Root:
         return ~c[-2]
 
     def body(c):
-        x, r, it, J, K, stage, _, _ = c
+        x, r, it, J, ramp, stage, _, _ = c
+        K = ramps[ramp]
         lam = stage / K
-        guess = jnp.where(stage == 1, jnp.where(K == STAGES[0], x0, lam * x_ramp), x)
+        guess = jnp.where(stage == 1, jnp.where(K == 1, x0, lam * x_ramp), x)
         x_new, r_new, J_new, it_new, code = newton(F_at(lam), guess, J0, tol, max_iter)
         ok = code == status.SUCCESS
-        K_next = jnp.where(ok, K, K * (STAGES[1] // STAGES[0]))
+        ramp_next = jnp.where(ok, ramp, ramp + 1)
         stage_next = jnp.where(ok, stage + 1, 1)
-        done = (ok & (stage == K)) | (K_next > STAGES[-1])
-        return x_new, r_new, it + it_new, J_new, jnp.where(done, K, K_next), stage_next, done, code
+        done = (ok & (stage == K)) | (ramp_next == len(stages))
+        return x_new, r_new, it + it_new, J_new, jnp.where(done, ramp, ramp_next), stage_next, done, code
 
-    init = (x0, jnp.full(n, jnp.inf), jnp.zeros((), jnp.int32), J0, STAGES[0], 1, False, status.SUCCESS)
-    x, r, it, J, K, _, _, code = lax.while_loop(not_done, body, init)
-    return Root(x, r, J, it, K, jnp.where(code == _STALLED, status.CONTINUATION_EXHAUSTED, code).astype(jnp.int32))
+    init = (x0, jnp.full(n, jnp.inf), jnp.zeros((), jnp.int32), J0, 0, 1, False, status.SUCCESS)
+    x, r, it, J, ramp, _, _, code = lax.while_loop(not_done, body, init)
+    code = jnp.where(code == _STALLED, status.CONTINUATION_EXHAUSTED, code).astype(jnp.int32)
+    return Root(x, r, J, it, ramps[ramp], code)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 from .checks import as_array, check_choice, check_integer, check_range, is_concrete
 from .tree import pytree, set_fields, static
 
@@ -15,6 +17,8 @@ TOL = 1e-10
 """Default convergence threshold on the scaled tip residual (max norm)."""
 MAX_ITER = 50
 """Default limit on Newton steps per load stage."""
+STAGES = (1, 4, 16)
+"""Default load continuation: numbers of equal load stages tried in turn when Newton fails."""
 
 
 @pytree
@@ -32,8 +36,9 @@ class SolverOptions:
             tilted by u x r_t) or "paper" (eqs. 21-22 as printed).
         tol: convergence threshold on the scaled tip residual (force / typical force, moment /
             (typical force x L)), max norm; finite and > 0.
-        max_iter: most Newton steps per load stage; when a stage fails the loads are ramped in
-            1, 4, then 16 stages (``Solution.iterations`` counts all steps).
+        max_iter: most Newton steps per load stage (``Solution.iterations`` counts all steps).
+        stages: load continuation, the numbers of equal load stages tried in turn, each ramp
+            from the straight rod when the one before fails (increasing positive integers).
     """
 
     steps: int = static(default=STEPS)
@@ -41,11 +46,18 @@ class SolverOptions:
     tendon_model: str = static(default="exact")
     tol: float = TOL
     max_iter: int = MAX_ITER
+    stages: tuple = static(default=STAGES)
 
     def __post_init__(self):
         set_fields(self, steps=check_integer("steps", self.steps))
         check_choice("transition", self.transition, TRANSITIONS)
         check_choice("tendon_model", self.tendon_model, TENDON_MODELS)
+        stages = tuple(self.stages) if isinstance(self.stages, (tuple, list)) else None
+        if not stages or any(isinstance(k, bool) or not isinstance(k, int) for k in stages):
+            raise ValueError(f"stages = {self.stages!r}: expected a non-empty tuple of positive integers, e.g. {STAGES}")
+        if stages[0] < 1 or any(b <= a for a, b in itertools.pairwise(stages)):
+            raise ValueError(f"stages = {stages}: expected positive integers in increasing order, e.g. {STAGES}")
+        set_fields(self, stages=stages)
         if is_concrete(self.tol):
             tol = as_array("tol", self.tol, ())
             check_range("tol", tol, 0.0, lo_open=True)

@@ -60,6 +60,11 @@ def scaled(robot: Robot, wrench, F_c):
     return jnp.concatenate([wrench[:3] / F_c, wrench[3:] / (F_c * robot.length)])
 
 
+def unscaled(robot: Robot, x, F_c):
+    """The base wrench (N(0) [N], M(0) [N m]) of scaled unknowns x (the inverse of ``scaled``)."""
+    return jnp.concatenate([x[:3] * F_c, x[3:] * (F_c * robot.length)])
+
+
 def shoot(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x, F_c, path: bool = False):
     """Integrates both segments from the scaled base unknowns x to the tip.
 
@@ -128,7 +133,7 @@ def root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: So
 
         return F
 
-    found = continuation(F_at, x0, x_straight, solver.tol, solver.max_iter)
+    found = continuation(F_at, x0, x_straight, solver.tol, solver.max_iter, solver.stages)
     return found.x, RootInfo(found.iterations, found.stages, found.result, found.jacobians)
 
 

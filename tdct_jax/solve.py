@@ -36,7 +36,7 @@ class Solution:
         residual: scaled tip residual (force rows, then moment rows), (6,).
         residual_norm: its max norm.
         iterations: Newton steps over all load stages.
-        stages: load stages of the last ramp tried (1, 4 or 16, see SolverOptions.max_iter).
+        stages: load stages of the last ramp tried (one of SolverOptions.stages).
         result: a ``tdct_jax.status`` code: SUCCESS (0), NEWTON_LIMIT, CONTINUATION_EXHAUSTED or
             NONFINITE; ``message`` says what it means and what to do.
     """

@@ -131,7 +131,10 @@ def configure(base, point):
 
 def _solve_point(base, point, kernel: Kernel, guess=None):
     robot, act, load = configure(base, point)
-    options = dict(gravity=base[3], solver=base[4], guess=guess, throw=False)
+    solver, budget = base[4], kernel.option("first_pass")
+    if budget is not None:  # the batch engine's first pass (batch.FIRST_PASS)
+        solver = dataclasses.replace(solver, max_iter=jnp.minimum(solver.max_iter, budget), stages=(1,))
+    options = dict(gravity=base[3], solver=solver, guess=guess, throw=False)
     if kernel.option("compliance"):
         C, sol = compliance_and_solution(robot, act, load, **options)
     else:
@@ -188,7 +191,7 @@ def _plan(robot, act, load, grid, batch, warm_start, shapes, compliance, devices
     first, last = k * rows // n_proc, (k + 1) * rows // n_proc
     if first == last:
         raise ValueError(f"{rows} {'paths' if warm_start else 'points'} cannot be split over jax.process_count() = {n_proc}")
-    kernel = Kernel(function, (("shapes", shapes), ("compliance", compliance)), mesh_for(devices))
+    kernel = Kernel(function, (("shapes", shapes), ("compliance", compliance)), mesh_for(devices), retire=not warm_start)
     mine = {name: v[first:last] for name, v in points.items()}
     return _Plan(kernel, base, mine, shape, axes, 1 + warm_start, first)
 

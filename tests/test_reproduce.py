@@ -24,8 +24,12 @@ def test_quick_reproduce_writes_every_figure_and_the_summary(tmp_path, capsys):
     assert sum(r["quantity"] == "load capacity" for r in rows) == 10
     assert {"optimal insertion", "compliance reduction by the tube", "largest bending angle"} <= {r["quantity"] for r in rows}
     for r in rows:
-        assert r["paper"] is not None and abs(r["relative_difference"] - (r["model"] - r["paper"]) / abs(r["paper"])) < 1e-12
+        if r["paper"] is None:  # a study the paper shows without a number (Sec. V.B's tip-angle range)
+            assert r["relative_difference"] is None and r["model"] is not None
+        else:
+            assert abs(r["relative_difference"] - (r["model"] - r["paper"]) / abs(r["paper"])) < 1e-12
         assert "NOT" not in r["note"]
+    assert sum(r["paper"] is not None for r in rows) >= 14
     assert summary["total_seconds"] > 0
     text = capsys.readouterr().out
     assert "| load capacity |" in text and "Total time" in text
