@@ -23,12 +23,13 @@ smaller batch rounds up to a power of two; other platforms take the cpu value). 
 fastest on one device of the 2-core CPU (664 solves/s against 569, 650 and 440 at 16, 256 and
 1,024; benchmarks/sweep_throughput.py). gpu: provisional, near the best batch of a batch-last
 prototype on one H100 (benchmarks/README.md), until benchmarks/gpu_throughput.py measures it."""
-FIRST_PASS = 8
-"""Newton steps each lane gets in a chunk's first pass, without load continuation, for kernels
-that allow it (``Kernel.retire``). A vmapped loop runs until its slowest lane stops, so lanes that
-need more (or fail) would hold every lane of their chunk through all continuation stages; instead
-they are solved again from the start with the full solver, RETRY_LANES at a time, and their
-answers are the single solve's. None: one pass. benchmarks/sweep_throughput.py measures both."""
+FIRST_PASS = 12
+"""Quasi-Newton steps each lane gets in a chunk's first pass, for kernels that allow it
+(``Kernel.retire``): one Jacobian pass, then Broyden updates, one integration per step, no load
+continuation. A vmapped loop runs until its slowest lane stops, so lanes that need more (or fail)
+would hold every lane of their chunk through all continuation stages; instead they are solved
+again from the start with the full solver, RETRY_LANES at a time, and their answers are the single
+solve's. None: one pass with the full solver. benchmarks/sweep_throughput.py measures both."""
 RETRY_LANES = 8
 """Configurations per compiled call of the second pass."""
 AXIS = "batch"
@@ -43,8 +44,8 @@ class Kernel:
     pytree every point shares (robot, actuation, load, gravity, solver options, ...).
     ``options`` are hashable settings the function reads (e.g. which outputs to return).
     ``retire``: the function returns a per-point ``result`` code and, given the option
-    ``first_pass`` (a number of Newton steps), solves with at most that many and no load
-    continuation; the engine then runs it in two passes (``FIRST_PASS``).
+    ``first_pass`` (a number of steps), makes a quick first try with at most that many; the
+    engine then runs it in two passes (``FIRST_PASS``).
     """
 
     function: Callable

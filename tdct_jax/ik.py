@@ -517,15 +517,16 @@ def optimise(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
         return ~c[-1]
 
     def body(c):
-        v, ev, H, s, lam, scale, rho, mu, corrected, it, code, _ = c
+        v, ev, kkt, H, s, lam, scale, rho, mu, corrected, it, code, _ = c
         first = it == 0
         trial = evaluate(v + s, ev.wrench, prob, plan)
+        kkt_trial = _kkt_residual(trial.dphi, trial.G, v + s, prob)  # unscaled: compared with its own kind
         scale = jnp.where(first, jnp.maximum(jnp.abs(trial.phi), 1e-300), scale)
         m, m_t = merit(ev, scale, rho), merit(trial, scale, rho)
         # at the optimum the merit stops resolving progress (round-off); there a step is taken
         # when it brings the first-order optimality residual down
         flat = (jnp.abs(m_t - m) <= 1e-13 * jnp.abs(m)) & (jnp.max(jnp.abs(trial.e)) <= tol)
-        sharper = _kkt_residual(trial.dphi / scale, trial.G, v + s, prob) < _kkt_residual(ev.dphi / scale, ev.G, v, prob)
+        sharper = kkt_trial < kkt
         near = jnp.max(jnp.abs(trial.e)) <= jnp.maximum(jnp.max(jnp.abs(ev.e)), DRIFT)
         better = first | (near & ((m_t <= m - 1e-15 * jnp.abs(m)) | (flat & sharper)))
         y = (trial.dphi - ev.dphi) / scale + (trial.G - ev.G).T @ lam
@@ -535,7 +536,7 @@ def optimise(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
         # on a curved manifold the l1 merit rejects good SQP steps)
         correct = ~better & ~corrected & (trial.code == status.SUCCESS)
         c = box_qp(trial.G.T @ trial.G + 1e-12 * jnp.eye(n), trial.G.T @ trial.e, prob.lo - v - s, prob.hi - v - s)[0]
-        v, ev = _where(better, (v + s, trial), (v, ev))
+        v, ev, kkt = _where(better, (v + s, trial, kkt_trial), (v, ev, kkt))
         mu = jnp.where(first | correct, mu, jnp.where(better, jnp.where(mu < 1e-10, 0.0, mu / 10), jnp.maximum(10 * mu, 1e-6)))
         # the next step, from the QP at the current point
         s_qp, lam_qp, ok = box_qp(H + mu * jnp.eye(n), ev.dphi / scale, prob.lo - v, prob.hi - v, J=ev.G, c=-ev.e)
@@ -543,16 +544,13 @@ def optimise(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
         lam = jnp.where(correct, lam, jnp.where(ok, lam_qp, 0.0))
         s = jnp.where(correct, s + c, s_qp)
         rho = jnp.maximum(rho, 2 * jnp.max(jnp.abs(lam), initial=0.0) + 1e-6)
-        g = ev.dphi / scale
-        converged = (
-            ~correct & (_kkt_residual(g, ev.G, v, prob) <= KKT_TOL * jnp.max(jnp.abs(g))) & (jnp.max(jnp.abs(ev.e)) <= tol)
-        )
+        converged = ~correct & (kkt <= KKT_TOL * jnp.max(jnp.abs(ev.dphi))) & (jnp.max(jnp.abs(ev.e)) <= tol)
         failed = ev.code != status.SUCCESS
         code = jnp.where(
             converged, status.SUCCESS, jnp.where(mu >= MU_GIVE_UP, status.CONTINUATION_EXHAUSTED, status.OUTER_LIMIT)
         )
         done = converged | failed | (it >= max_steps) | (mu >= MU_GIVE_UP)
-        return v, ev, H, s, lam, scale, rho, mu, correct, it + 1, jnp.where(failed, ev.code, code).astype(jnp.int32), done
+        return v, ev, kkt, H, s, lam, scale, rho, mu, correct, it + 1, jnp.where(failed, ev.code, code).astype(jnp.int32), done
 
     start = _unset(lambda v: evaluate(v, wrench0, prob, plan), v0)._replace(wrench=wrench0)
     m = prob.target.size
@@ -560,6 +558,7 @@ def optimise(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
     init = (
         v0,
         start,
+        jnp.asarray(jnp.inf),
         jnp.eye(n),
         zero,
         jnp.zeros(m),
@@ -580,7 +579,9 @@ def _kkt_residual(g, G, v, prob: Problem):
     g + G^T lam (lam least squares on the inputs off their bounds), on the inputs it could move:
     off their bounds, or at one with the gradient pointing into the box."""
     inside = (v > prob.lo) & (v < prob.hi)
-    lam = -jnp.linalg.lstsq((G * inside[None, :]).T, g * inside)[0]
+    G_in = G * inside[None, :]
+    A = G_in @ G_in.T
+    lam = -jnp.linalg.solve(A + (1e-14 * jnp.trace(A) + 1e-300) * jnp.eye(A.shape[0]), G_in @ g)
     r = g + G.T @ lam
     movable = jnp.where(v <= prob.lo, r < 0, jnp.where(v >= prob.hi, r > 0, True))
     return jnp.max(jnp.abs(jnp.where(movable, r, 0.0)))

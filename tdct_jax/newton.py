@@ -81,6 +81,40 @@ def newton(F, x0, J0, tol, max_iter):
     return x, r, J, it - 1, code
 
 
+def broyden(F, x0, tol, max_iter):
+    """Quasi-Newton on F(x)[0] = 0 for batches: the exact ``jax.jacfwd`` Jacobian at x0, then
+    Broyden's rank-one ("good") updates, so each step costs one evaluation of F instead of a
+    Jacobian pass. Undamped and without continuation: it is a first try, and whoever calls it
+    solves what it leaves unconverged again with ``continuation``.
+
+    Returns:
+        (x, residual, outputs, steps taken, code): SUCCESS, NEWTON_LIMIT or NONFINITE. The
+        outputs are F's at the returned x.
+    """
+
+    def fr(x):
+        r, out = F(x)
+        return r, (r, out)
+
+    J, (r0, out0) = jax.jacfwd(fr, has_aux=True)(x0)
+
+    def not_done(c):
+        x, r, out, J, it = c
+        return (it < max_iter) & (jnp.max(jnp.abs(r)) > tol) & jnp.all(jnp.isfinite(r))
+
+    def body(c):
+        x, r, out, J, it = c
+        dx = -jnp.linalg.solve(J, r)
+        r_new, out_new = F(x + dx)
+        J = J + jnp.outer(r_new - r - J @ dx, dx) / (dx @ dx)
+        return x + dx, r_new, out_new, J, it + 1
+
+    x, r, out, _, it = lax.while_loop(not_done, body, (x0, r0, out0, J, 0))
+    norm = jnp.max(jnp.abs(r))
+    code = jnp.where(norm <= tol, status.SUCCESS, jnp.where(jnp.isfinite(norm), status.NEWTON_LIMIT, status.NONFINITE))
+    return x, r, out, it, code.astype(jnp.int32)
+
+
 def continuation(F_at, x0, x_ramp, tol, max_iter, stages=(1, 4, 16)) -> Root:
     """Solves F_at(1)(x)[0] = 0 from x0, ramping the loads in stages when plain Newton fails.
 

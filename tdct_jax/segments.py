@@ -56,7 +56,8 @@ class Segment:
         rho: linear density [kg/m].
         tau: tendon tensions [N], (n_t,).
         r: body-frame tendon offsets [m], (n_t, 3).
-        backbone: the tube is inside (no shear). Static.
+        backbone: 1.0 where the tube is inside (no shear), 0.0 in the silicone-only segment (a
+            leaf, so that both segments run through one compiled vector field).
         tilt: tendon tangents follow pb_t = u x r_t + v ("exact"); False uses t_t = e3, the printed
             eqs. 21-22 ("paper" backbone option). Static.
     """
@@ -66,7 +67,7 @@ class Segment:
     rho: jax.Array
     tau: jax.Array
     r: jax.Array
-    backbone: bool = dataclasses.field(metadata=dict(static=True))
+    backbone: jax.Array
     tilt: bool = dataclasses.field(metadata=dict(static=True), default=True)
 
 
@@ -102,8 +103,7 @@ def _tilt_free(seg: Segment, bf, bm):
     """(v, u) with every tendon tangent e3: exact for the "paper" tendon model, else Newton's guess."""
     tau = seg.tau
     v = E3 + (bf - jnp.sum(tau) * E3) / seg.K_se
-    if seg.backbone:
-        v = v * E3
+    v = jnp.where(seg.backbone > 0, v * E3, v)
     u = (bm - jnp.sum(tau[:, None] * jnp.cross(seg.r, E3[None]), axis=0)) / seg.K_bt
     return v, u
 
@@ -129,11 +129,10 @@ def _residual_and_jacobian(seg: Segment, w, bf, bm):
             [(rh @ P).sum(0), jnp.diag(seg.K_bt) - (rh @ PW).sum(0)],
         ]
     )
-    if seg.backbone:
-        keep = jnp.array([0.0, 0.0, 1.0, 1.0, 1.0, 1.0])
-        J = J * keep[:, None] * keep[None, :] + jnp.diag(1.0 - keep)
-        F = F * keep
-    return F, J
+    shear = 1.0 - seg.backbone
+    keep = jnp.stack([shear, shear, *jnp.ones(4)])
+    J = J * keep[:, None] * keep[None, :] + jnp.diag(1.0 - keep)
+    return F * keep, J
 
 
 @jax.custom_jvp
@@ -168,7 +167,7 @@ def rod_force(seg: Segment, y: State, v, u):
 def vector_field(seg: Segment, gravity):
     """d/ds of the State for one segment; ``gravity`` [m/s^2] in the world frame."""
 
-    def f(s, y: State) -> State:
+    def f(y: State) -> State:
         v, u = strains(seg, y.R, y.N, y.M)
         dp = y.R @ v
         dM = -jnp.cross(dp, y.N)

@@ -92,10 +92,15 @@ def solution_and_compliance(robot: Robot, act: Actuation, load: TipLoad, gravity
     """
     x, info = root(robot, act, load, gravity, guess, solver)
     J_res, (J_p, J_R) = info.jacobians
-    F_c = force_scale(robot, act, load, gravity)
-    res, ys = shoot(robot, act, load, gravity, solver, x, F_c, path=True)
-    sol = _assemble(robot, act, solver, ys, res, info)
-    return sol, tip_compliance(robot, sol.tip_rotation, J_res, J_p, J_R, F_c)
+    sol = solution_at(robot, act, load, gravity, solver, x, info)
+    return sol, tip_compliance(robot, sol.tip_rotation, J_res, J_p, J_R, force_scale(robot, act, load, gravity))
+
+
+def solution_at(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x, info) -> Solution:
+    """The Solution at the scaled base unknowns x of a root found elsewhere (``info``: its
+    iterations, stages and result code), by one integration along the path."""
+    res, ys = shoot(robot, act, load, gravity, solver, x, force_scale(robot, act, load, gravity), path=True)
+    return _assemble(robot, act, solver, ys, res, info)
 
 
 def _node_quantities(back: Segment, sil: Segment, y: State, in_backbone):

@@ -32,7 +32,8 @@ from .mechanics import compliance_and_solution
 from .options import DEFAULT_SOLVER, SolverOptions
 from .results import SweepChunk, SweepResult, part_path
 from .robot import SCALAR_FIELDS, Robot
-from .solve import check_inputs, solve, tip_angle
+from .shooting import RootInfo, compliance_at, force_scale, quick_root, unscaled
+from .solve import check_inputs, solution_at, solve, tip_angle
 
 
 def _point_shape(name: str, robot: Robot) -> tuple[int, ...]:
@@ -131,10 +132,9 @@ def configure(base, point):
 
 def _solve_point(base, point, kernel: Kernel, guess=None):
     robot, act, load = configure(base, point)
-    solver, budget = base[4], kernel.option("first_pass")
-    if budget is not None:  # the batch engine's first pass (batch.FIRST_PASS)
-        solver = dataclasses.replace(solver, max_iter=jnp.minimum(solver.max_iter, budget), stages=(1,))
-    options = dict(gravity=base[3], solver=solver, guess=guess, throw=False)
+    if kernel.option("first_pass") is not None:
+        return _first_pass(robot, act, load, base[3], base[4], kernel)
+    options = dict(gravity=base[3], solver=base[4], guess=guess, throw=False)
     if kernel.option("compliance"):
         C, sol = compliance_and_solution(robot, act, load, **options)
     else:
@@ -152,6 +152,33 @@ def _solve_point(base, point, kernel: Kernel, guess=None):
         out.update(s=sol.s, position=sol.position)
     if kernel.option("compliance"):
         out["compliance"] = C[:3, :3]
+    return out
+
+
+def _first_pass(robot, act, load, gravity, solver, kernel: Kernel):
+    """The batch engine's first pass: Broyden from the straight rod (``shooting.quick_root``), at
+    most ``batch.FIRST_PASS`` steps and no more than the solver's ``max_iter``; shapes come from one
+    integration along the path at its root, the compliance from one Jacobian pass there. Lanes it
+    leaves unconverged are solved again by ``_solve_point`` without the option."""
+    found = quick_root(robot, act, load, gravity, solver, jnp.minimum(kernel.option("first_pass"), solver.max_iter))
+    F_c = force_scale(robot, act, load, gravity)
+    out = dict(
+        tip_position=found.tip_position,
+        tip_rotation=found.tip_rotation,
+        result=found.result,
+        iterations=found.iterations,
+        stages=jnp.ones((), jnp.int32),
+        residual_norm=jnp.max(jnp.abs(found.residual)),
+        base_wrench=unscaled(robot, found.x, F_c),
+    )
+    if kernel.option("shapes"):
+        sol = solution_at(
+            robot, act, load, gravity, solver, found.x, RootInfo(found.iterations, out["stages"], found.result, None)
+        )
+        out.update(s=sol.s, position=sol.position)
+    if kernel.option("compliance"):
+        C = compliance_at(robot, act, load, gravity, solver, found.x)[:3, :3]
+        out["compliance"] = jnp.where(found.result == status.SUCCESS, C, jnp.nan)
     return out
 
 

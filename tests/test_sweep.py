@@ -30,9 +30,10 @@ def test_grid_sweep_equals_one_by_one_solves(robot, grid_sweep):
     for i, d in enumerate(GRID["insertion"]):
         for j, m in enumerate(GRID["tip_mass"]):
             single = tdct.solve(robot, tdct.Actuation(BASE.tensions, d), tdct.TipLoad.from_mass(m))
-            np.testing.assert_allclose(res.tip_position[i, j], single.tip_position, rtol=0, atol=1e-12)
-            np.testing.assert_allclose(res.tip_angle[i, j], single.tip_angle, rtol=0, atol=1e-12)
-            assert res.iterations[i, j] == single.iterations
+            # the batch engine's first pass is a quasi-Newton method: the same root, to the tolerance
+            np.testing.assert_allclose(res.tip_position[i, j], single.tip_position, rtol=0, atol=1e-9)
+            np.testing.assert_allclose(res.tip_angle[i, j], single.tip_angle, rtol=0, atol=1e-8)
+            assert res.result[i, j] == single.result
     np.testing.assert_array_equal(res.inputs["insertion"][:, 1], GRID["insertion"])
 
 
