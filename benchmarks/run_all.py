@@ -26,8 +26,7 @@ SCRIPTS = (
     ("compliance_autodiff_vs_fd.py", {}),
     ("trajectory.py", {}),
     ("peer_pyelastica.py", {}),  # writes nothing without the peer extra
-    ("sweep_throughput.py", {}),
-    ("sweep_throughput.py", {"JAX_NUM_CPU_DEVICES": "2"}),  # both cores on one sweep
+    ("sweep_throughput.py", {}),  # one device, then one per core
     ("durable_sweep.py", {}),
     ("ik.py", {}),
     ("gpu_throughput.py", {}),  # writes nothing where JAX sees no GPU
@@ -51,7 +50,7 @@ def summary(suffix: str, seconds: dict) -> str:
     lines = [f"# Benchmark summary{' (quick)' if suffix else ''}", ""]
     latency, accuracy, base = _load("latency", suffix), _load("accuracy_steps", suffix), _load("baseline", suffix)
     compliance, sweep = _load("compliance", suffix), _load("sweep_throughput", suffix)
-    sweep2, trajectory = _load("sweep_throughput_cpu2", suffix), _load("trajectory", suffix)
+    trajectory = _load("trajectory", suffix)
     peer = _load("peer_pyelastica", suffix)
     gpu = _load("gpu_throughput", suffix)
     errors = {r["steps_per_segment"]: r["max_tip_error_um"] for r in accuracy["rows"]} if accuracy else {}
@@ -136,24 +135,18 @@ def summary(suffix: str, seconds: dict) -> str:
             ],
         )
     if sweep:
-        on_two = {r["batch"]: r["solves_per_s"] for r in sweep2["rows"] if r["kind"] == "batch"} if sweep2 else {}
+        lines += [f"Sweeps, the batch engine against a plain vmap of the single solve (load {sweep['load_average_1min']}):", ""]
         lines += _table(
-            (
-                "batch",
-                "solves/s, 1 CPU device",
-                "solves/s, 2 CPU devices",
-                "peak memory",
-                "failed",
-                "tip error at this step count",
-            ),
+            ("CPU devices", "batch", "failing", "engine solves/s", "plain solves/s", "ratio (median of pairs)", "peak memory"),
             [
                 (
+                    r["devices"],
                     r["batch"],
-                    f"{r['solves_per_s']:.0f}",
-                    f"{on_two[r['batch']]:.0f}" if r["batch"] in on_two else "-",
-                    f"{r['peak_rss_mb']:.0f} MB" if "peak_rss_mb" in r else "-",
-                    r["failed"],
-                    accuracy_at(sweep["steps"]),
+                    f"{r['failing']:.0%}",
+                    f"{r['engine_solves_per_s']:.0f}",
+                    f"{r['plain_solves_per_s']:.0f}",
+                    f"{r['speedup']:.2f}x",
+                    f"{r['peak_rss_mb']:.0f} MB",
                 )
                 for r in sweep["rows"]
                 if r["kind"] == "batch"

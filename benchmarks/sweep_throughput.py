@@ -1,17 +1,23 @@
-"""Sweep throughput: solves per second against batch size and chunk size, with and without warm starts.
+"""Sweep throughput: the batch engine against a plain vmap of the single solve, side by side.
 
 Run: python benchmarks/sweep_throughput.py [--quick]
-Writes benchmarks/results/sweep_throughput.json (and _quick.json with --quick). Run with
-JAX_NUM_CPU_DEVICES=K in the environment, JAX splits the CPU into K devices and every chunk is
-sharded over them, so K cores work on a sweep (results in sweep_throughput_cpuK[_quick].json). Each figure is
-the median of ``--repeats`` warm sweeps (compile excluded and reported separately); the envelope
-is random tensions (0-10 N on tendon 1 and 4), insertions (0-160 mm) and tip masses (0-50 g).
-Each row also records the process's peak resident memory so far (batches run smallest first).
+The process splits the CPU into one JAX device per core (JAX_NUM_CPU_DEVICES, unless already set).
+For one device and for all of them, each batch size, and 0% or 1% failing points (400 N with no
+tube: the residual stops being finite), it times the engine (``tdct.sweep`` as shipped: a Broyden
+first pass, then stragglers and failures solved again apart by the full solver) and the plain path
+(``batch.FIRST_PASS = None``: every chunk one vmap of the full single solve) alternately,
+``--repeats`` times each, and records both medians and the median of the pair-by-pair ratios; the
+first call of each (compile included) is reported apart. Both see the same random envelope points
+(tensions 0-10 N on tendon 1 and, for 30% of the points, tendon 4; insertions 0-160 mm; tip masses
+0-50 g). Then the engine's chunk size on one device. Each row also records the largest tip
+difference between the two over the converged points, whether their result codes agree, and the
+process's peak resident memory so far. Writes benchmarks/results/sweep_throughput[_quick].json.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -20,85 +26,110 @@ import numpy as np
 from _common import peak_rss_mb, write_result
 
 import tdct_jax as tdct
-from tdct_jax.batch import CHUNK_SIZES, lanes_per_call
+from tdct_jax import batch
 
-STEPS = tdct.SolverOptions().steps
-DEFAULT_CHUNK = CHUNK_SIZES["cpu"]
+ENGINE_FIRST_PASS = batch.FIRST_PASS
 
 
-def envelope(n: int, seed: int = 0) -> dict:
+def envelope(n: int, failing: float = 0.0, seed: int = 0) -> dict:
+    """n random points over the operating envelope; a fraction ``failing`` of them, spread evenly,
+    at 400 N with no tube."""
     rng = np.random.default_rng(seed)
     tensions = np.zeros((n, 4))
     tensions[:, 0], tensions[:, 3] = rng.uniform(0, 10, n), rng.uniform(0, 10, n) * (rng.random(n) < 0.3)
-    return {"tensions": tensions, "insertion": rng.uniform(0, 0.16, n), "tip_mass": rng.uniform(0, 0.05, n)}
+    insertion = rng.uniform(0, 0.16, n)
+    bad = np.linspace(0, n - 1, int(round(failing * n))).astype(int)
+    tensions[bad], insertion[bad] = (400.0, 0, 0, 0), 0.0
+    return {"tensions": tensions, "insertion": insertion, "tip_mass": rng.uniform(0, 0.05, n)}
 
 
-def measure(run, repeats: int, first: bool = True) -> dict:
-    """The first call (compile included; skipped when an earlier sweep compiled the same chunk
-    size) and the median of ``repeats`` warm sweeps."""
-    first_s = float("nan")
-    if first:
+def sweep(robot, points, first_pass, **options):
+    batch.FIRST_PASS = first_pass
+    try:
+        return tdct.sweep(robot, batch=points, progress=False, throw=False, **options)
+    finally:
+        batch.FIRST_PASS = ENGINE_FIRST_PASS
+
+
+def side_by_side(robot, points, repeats: int, **options) -> dict:
+    """The engine and the plain path on the same points, alternately."""
+    first, times, results = {}, {"engine": [], "plain": []}, {}
+    for name, fp in (("engine", ENGINE_FIRST_PASS), ("plain", None)):
         t = time.perf_counter()
-        run()
-        first_s = time.perf_counter() - t
-    times, failed = [], 0
+        results[name] = sweep(robot, points, fp, **options)
+        first[name] = time.perf_counter() - t
     for _ in range(repeats):
-        t = time.perf_counter()
-        res = run()
-        times.append(time.perf_counter() - t)
-        failed += res.n_failed
-    n = int(np.prod(res.shape))
-    median = float(np.median(times))
+        for name, fp in (("engine", ENGINE_FIRST_PASS), ("plain", None)):
+            t = time.perf_counter()
+            sweep(robot, points, fp, **options)
+            times[name].append(time.perf_counter() - t)
+    n = len(points["insertion"])
+    e, p = results["engine"], results["plain"]
+    ok = e.converged & p.converged
     return dict(
         points=n,
-        first_call_s=first_s,
-        median_s=median,
-        solves_per_s=n / median,
-        failed=failed,
-        newton_iterations=int(res.iterations.sum()),
-        peak_rss_mb=peak_rss_mb(),  # the process's, so far
+        engine_solves_per_s=n / float(np.median(times["engine"])),
+        plain_solves_per_s=n / float(np.median(times["plain"])),
+        speedup=float(np.median(np.array(times["plain"]) / np.array(times["engine"]))),
+        engine_first_call_s=first["engine"],
+        plain_first_call_s=first["plain"],
+        failed=int(e.n_failed),
+        same_result_codes=bool(np.array_equal(e.result, p.result)),
+        max_tip_difference_m=float(np.max(np.abs(e.tip_position[ok] - p.tip_position[ok]))) if ok.any() else None,
+        engine_mean_iterations=float(e.iterations.mean()),
+        plain_mean_iterations=float(p.iterations.mean()),
+        peak_rss_mb=peak_rss_mb(),
     )
+
+
+def load() -> str:
+    return Path("/proc/loadavg").read_text().split()[0] if Path("/proc/loadavg").exists() else "?"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="batches up to 256, two chunk sizes, one repeat")
+    parser.add_argument("--quick", action="store_true", help="one batch size, two chunk sizes, one repeat")
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
-    devices = jax.device_count()
+    if "JAX_NUM_CPU_DEVICES" not in os.environ:  # before JAX starts its backend
+        jax.config.update("jax_num_cpu_devices", os.cpu_count() or 1)
     repeats = 1 if args.quick else args.repeats
     robot = tdct.Robot()
-    batches = (1, 16, 256) if args.quick else (1, 10, 100, 1000, 10000)
-    chunks = (16, 64) if args.quick else (16, 64, 256, 1024)
-    chunk_batch = 256 if args.quick else 512
+    devices = jax.devices()
+    device_sets = [devices[:1]] + ([devices] if len(devices) > 1 else [])
+    batches = (128,) if args.quick else (256, 1024, 4096)
+    chunks = (32, 64) if args.quick else (16, 32, 64, 128, 256)
+    load_before = load()
 
     rows = []
-    for b in batches:
-        # 10,000 reuses the chunk size 1,000 compiled: no first call; large batches are timed once.
-        rec = measure(
-            lambda b=b: tdct.sweep(robot, batch=envelope(b), progress=False), 1 if b >= 1000 else repeats, first=b < 10000
-        )
-        rows.append(dict(kind="batch", batch=b, chunk=lanes_per_call(b, DEFAULT_CHUNK, devices), **rec))
-        print(rows[-1], flush=True)
+    for devs in device_sets:
+        for b in batches:
+            for failing in (0.0, 0.01):
+                rec = side_by_side(robot, envelope(b, failing), repeats, devices=devs)
+                rows.append(dict(kind="batch", devices=len(devs), batch=b, failing=failing, chunk=None, **rec))
+                print(rows[-1], flush=True)
+    chunk_batch = 256 if args.quick else 1024
     for c in chunks:
-        rec = measure(lambda c=c: tdct.sweep(robot, batch=envelope(chunk_batch), chunk_size=c, progress=False), 1)
-        rows.append(dict(kind="chunk", batch=chunk_batch, chunk=c, **rec))
+        rec = side_by_side(robot, envelope(chunk_batch), repeats, devices=devices[:1], chunk_size=c)
+        rows.append(dict(kind="chunk", devices=1, batch=chunk_batch, failing=0.0, chunk=c, **rec))
         print(rows[-1], flush=True)
-    # Warm starts: paths of increasing tension (the last grid axis), one per insertion.
-    n_paths, n_steps = (8, 6) if args.quick else (32, 16)
-    grid = {"insertion": np.linspace(0, 0.16, n_paths), "tensions": np.outer(np.linspace(0, 10, n_steps), [1.0, 0, 0, 0])}
-    for warm in (False, True):
-        rec = measure(lambda w=warm: tdct.sweep(robot, grid=grid, warm_start=w, progress=False), 1)
-        chunk = n_paths if warm else lanes_per_call(n_paths * n_steps, DEFAULT_CHUNK)
-        rows.append(dict(kind="warm start" if warm else "cold start", batch=n_paths * n_steps, chunk=chunk, **rec))
-        print(rows[-1], flush=True)
-    name = f"sweep_throughput{f'_cpu{devices}' if devices > 1 else ''}{'_quick' if args.quick else ''}.json"
-    write_result(Path(__file__).parent / "results" / name, steps=STEPS, repeats=repeats, devices=devices, rows=rows)
-    print(f"{'kind':<11} {'batch':>6} {'chunk':>6} {'solves/s':>9} {'first call s':>12} {'iterations':>10} failed")
+
+    name = f"sweep_throughput{'_quick' if args.quick else ''}.json"
+    write_result(
+        Path(__file__).parent / "results" / name,
+        steps=tdct.SolverOptions().steps,
+        first_pass=ENGINE_FIRST_PASS,
+        default_chunks=batch.CHUNK_SIZES,
+        repeats=repeats,
+        load_average_1min=[load_before, load()],
+        rows=rows,
+    )
+    print(f"{'kind':<6} {'dev':>3} {'batch':>6} {'fail':>5} {'chunk':>5} {'engine/s':>9} {'plain/s':>8} {'ratio':>6} tip diff")
     for r in rows:
+        diff = "-" if r["max_tip_difference_m"] is None else f"{r['max_tip_difference_m']:.1e}"
         print(
-            f"{r['kind']:<11} {r['batch']:>6} {r['chunk']:>6} {r['solves_per_s']:>9.1f} {r['first_call_s']:>12.1f}"
-            f" {r['newton_iterations']:>10} {r['failed']}"
+            f"{r['kind']:<6} {r['devices']:>3} {r['batch']:>6} {r['failing']:>5.0%} {r['chunk'] or '-':>5}"
+            f" {r['engine_solves_per_s']:>9.0f} {r['plain_solves_per_s']:>8.0f} {r['speedup']:>6.2f} {diff}"
         )
 
 

@@ -28,7 +28,7 @@ def test_one_options_object_reaches_solve_compliance_and_sweep(robot):
 
     res = tdct.sweep(robot, ACT, LOAD, batch={"insertion": [0.05, 0.1]}, shapes=True, solver=OPTIONS, progress=False)
     assert res.position.shape == (2, NODES, 3)
-    np.testing.assert_allclose(res.tip_position[0], sol.tip_position, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(res.tip_position[0], sol.tip_position, rtol=0, atol=1e-9)  # the engine's own root
 
 
 def test_one_options_object_reaches_capacity_and_calibrate(robot):
