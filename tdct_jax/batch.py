@@ -31,7 +31,8 @@ would hold every lane of their chunk through all continuation stages; instead th
 again from the start with the full solver, RETRY_LANES at a time, and their answers are the single
 solve's. None: one pass with the full solver. benchmarks/sweep_throughput.py measures both."""
 RETRY_LANES = 8
-"""Configurations per compiled call of the second pass."""
+"""Most configurations per compiled call of the second pass (fewer lanes, rounded up to a power of
+two, when fewer need it: a padded lane costs a whole solve)."""
 AXIS = "batch"
 """Name of the device-mesh axis the batch is sharded over."""
 
@@ -134,7 +135,7 @@ def iter_batched(
         out = {k: np.array(v[:m]) for k, v in jax.device_get(out).items()}  # writable: retried lanes go in
         if two_pass:
             again = np.flatnonzero(out["result"] != status.SUCCESS)
-            lanes = min(chunk, lanes_per_call(RETRY_LANES, RETRY_LANES, 1 if kernel.mesh is None else kernel.mesh.size))
+            lanes = min(chunk, lanes_per_call(len(again), RETRY_LANES, 1 if kernel.mesh is None else kernel.mesh.size))
             for group in np.array_split(again, -(-len(again) // lanes)) if len(again) else ():
                 bar.set_postfix_str(f"solving {len(again)} apart")
                 retried = jax.device_get(run(kernel, start + group, lanes))

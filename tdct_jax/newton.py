@@ -123,7 +123,7 @@ def continuation(F_at, x0, x_ramp, tol, max_iter, stages=(1, 4, 16)) -> Root:
     from the last root, the first from lam * x_ramp (a start that is linear in the loads, e.g. the
     straight rod), or from x0 when K is the first ramp's 1.
     """
-    ramps = jnp.asarray(stages)
+    ramps = jnp.asarray(stages, jnp.int32)
     n = x0.size
     J0 = jax.tree.map(lambda o: jnp.zeros(jnp.shape(o) + (n,)), jax.eval_shape(F_at(1.0), x0))
 
