@@ -197,16 +197,20 @@ def calibration_conditions(robot: Robot, tensions=CALIBRATION_TENSIONS) -> list[
 
 # ----------------------------------------------------------------------------- Secs. V.A and V.B as inverse kinematics
 
-VB_HEIGHTS = tuple(MM * y for y in (0, 20, 40, 60, 80))
+VB_HEIGHTS = tuple(MM * y for y in (0, 20, 40, 60))
 """Sec. V.B study: fixed tip heights y [m] in the z-y plane."""
 VB_INSERTIONS = tuple(MM * d for d in range(0, 161, 10))
 """Sec. V.B study: the tube depths [m] at which tendon 1 is re-solved to hold each height."""
 VA_HEIGHTS = tuple(MM * y for y in (-60, -40, -20, 0, 20))
 """Sec. V.A as IK: tip heights [m] to reach with 50 g at the tip, stiffest first."""
 VA_MASS = 50 * G
-MAP_Z = tuple(MM * z for z in range(60, 161, 10))
-MAP_Y = tuple(MM * y for y in range(0, 121, 10))
-"""Stiffness map: a grid of in-plane tip targets (z, y) [m]."""
+MAP_TENSIONS = tuple(float(t) for t in np.linspace(2.0, 10.0, 9))
+MAP_INSERTIONS = tuple(MM * d for d in range(0, 161, 20))
+MAP_COUNTER = 1.0
+"""Stiffness map: its in-plane tip targets are the tips of tendon 1 at MAP_TENSIONS [N] with
+MAP_COUNTER [N] on tendon 3, at MAP_INSERTIONS [m]: reachable by construction, with every input
+inside its bounds, so that one input is to spare (the reachable set is a band a few millimetres
+wide, which a grid of targets in z and y would mostly miss)."""
 
 
 class AngleFamily(NamedTuple):
@@ -283,10 +287,13 @@ def stiffest_reach(
 
 
 class StiffnessMap(NamedTuple):
-    """Over in-plane tip targets (z, y) [m], tendons 1 and 3 and the tube: the compliance along -y
-    [m/N] of the least-tension solution and of the stiffest one, with their insertions [m]
-    (NaN where unreachable)."""
+    """Over in-plane tip targets (rows: the tendon-1 tensions, columns: the insertions that made
+    them), tendons 1 and 3 and the tube re-solved by inverse kinematics: the targets' z and y [m],
+    the compliance along -y [m/N] of the least-tension solution and of the stiffest one, and their
+    insertions [m] (NaN where the IK did not reach)."""
 
+    tensions: np.ndarray
+    insertions: np.ndarray
     z: np.ndarray
     y: np.ndarray
     least_tension: np.ndarray
@@ -295,12 +302,19 @@ class StiffnessMap(NamedTuple):
     insertion_stiffest: np.ndarray
 
 
-def stiffness_map(robot: Robot, z=MAP_Z, y=MAP_Y, **options) -> StiffnessMap:
-    """Where, and by how much, choosing the insertion for stiffness (the redundant input: two
-    in-plane coordinates, three inputs) lowers the tip compliance along -y against the
-    least-tension choice."""
-    Z, Y = np.meshgrid(np.asarray(z), np.asarray(y), indexing="ij")
-    targets = Target(np.column_stack([np.zeros(Z.size), Y.ravel(), Z.ravel()]), axes="yz")
+def stiffness_map(
+    robot: Robot, tensions=MAP_TENSIONS, insertions=MAP_INSERTIONS, counter: float = MAP_COUNTER, **options
+) -> StiffnessMap:
+    """Where, and by how much, choosing the redundant input for stiffness (two in-plane
+    coordinates, three inputs: tendons 1 and 3 and the insertion) lowers the tip compliance along
+    -y against the least-tension choice, over targets made by forward solves (see MAP_COUNTER)."""
+    made = sweep(
+        robot,
+        grid={"tensions": np.outer(tensions, [1.0, 0, 0, 0]) + counter * np.array([0, 0, 1.0, 0]), "insertion": insertions},
+        progress=False,
+    )
+    tips = made.tip_position.reshape(-1, 3)
+    targets = Target(np.column_stack([np.zeros(len(tips)), tips[:, 1], tips[:, 2]]), axes="yz")
     down = np.array([0.0, -1.0, 0.0])
     out = {}
     for name, objective in (("least_tension", "tension"), ("stiffest", "stiffness")):
@@ -310,9 +324,16 @@ def stiffness_map(robot: Robot, z=MAP_Z, y=MAP_Y, **options) -> StiffnessMap:
         acts = zip(np.asarray(r.actuation.tensions), np.asarray(r.actuation.insertion), strict=True)
         c = [down @ np.asarray(compliance(robot, Actuation(t, d), throw=False)) @ down for t, d in acts]
         out[name] = (
-            np.where(ok, c, np.nan).reshape(Z.shape),
-            np.where(ok, np.asarray(r.actuation.insertion), np.nan).reshape(Z.shape),
+            np.where(ok, c, np.nan).reshape(made.shape),
+            np.where(ok, np.asarray(r.actuation.insertion), np.nan).reshape(made.shape),
         )
     return StiffnessMap(
-        np.asarray(z), np.asarray(y), out["least_tension"][0], out["stiffest"][0], out["least_tension"][1], out["stiffest"][1]
+        np.asarray(tensions),
+        np.asarray(insertions),
+        made.tip_position[..., 2],
+        made.tip_position[..., 1],
+        out["least_tension"][0],
+        out["stiffest"][0],
+        out["least_tension"][1],
+        out["stiffest"][1],
     )

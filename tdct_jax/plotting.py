@@ -387,16 +387,24 @@ def plot_stiffest_reach(reach, optimum=None, path: str | Path | None = None):
 
 def plot_stiffness_map(stiffness, path: str | Path | None = None):
     """Tip compliance along -y over in-plane targets: least-tension solution, and how much lower the
-    stiffest (insertion chosen for stiffness) is [%]."""
+    stiffest (the redundant input chosen for stiffness) is [%]."""
     plt = _pyplot()
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.4))
-    Z, Y = np.meshgrid(stiffness.z * 1e3, stiffness.y * 1e3, indexing="ij")
-    im = ax.pcolormesh(Z, Y, stiffness.least_tension * 1e3, shading="nearest", cmap="magma_r")
-    fig.colorbar(im, ax=ax, label="compliance along -y [mm/N]")
-    ax.set(xlabel="target z [mm]", ylabel="target y [mm]", title="least-tension solution", aspect="equal")
-    gain = 100 * (1 - stiffness.stiffest / stiffness.least_tension)
-    im = bx.pcolormesh(Z, Y, gain, shading="nearest", cmap="viridis")
-    fig.colorbar(im, ax=bx, label="compliance lower by [%]")
-    bx.set(xlabel="target z [mm]", ylabel="target y [mm]", title="stiffest solution against it", aspect="equal")
-    fig.suptitle("Tendons 1 and 3 with the tube: where redundancy buys stiffness (white: unreachable)")
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.6), sharey=True)
+    z, y = stiffness.z.ravel() * 1e3, stiffness.y.ravel() * 1e3
+    gain = 100 * (1 - stiffness.stiffest / stiffness.least_tension).ravel()
+    for axis, value, label, cmap in (
+        (ax, stiffness.least_tension.ravel() * 1e3, "least-tension compliance along -y [mm/N]", "magma_r"),
+        (bx, gain, "stiffest: compliance lower by [%]", "viridis"),
+    ):
+        reached = np.isfinite(value)
+        im = axis.scatter(z[reached], y[reached], c=value[reached], cmap=cmap, s=50, edgecolors="none")
+        axis.scatter(z[~reached], y[~reached], marker="x", color="0.5", s=30, label="not reached")
+        fig.colorbar(im, ax=axis, label=label)
+        axis.set(xlabel="target z [mm]")
+        axis.grid(alpha=0.3)
+    ax.set(ylabel="target y [mm]", title="least-tension solution")
+    bx.set(title="stiffest solution against it")
+    if not np.all(np.isfinite(gain)):
+        bx.legend(loc="best", fontsize=8)
+    fig.suptitle("Tendons 1 and 3 with the tube, targets in the z-y plane: where redundancy buys stiffness")
     return _finish(fig, path)

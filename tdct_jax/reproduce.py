@@ -31,7 +31,7 @@ FULL = dict(
     table3=(paper.TABLE3_TENSIONS, paper.TABLE3_INSERTIONS, paper.TABLE3_MASSES),
     vb=(paper.VB_HEIGHTS, paper.VB_INSERTIONS),
     va_heights=paper.VA_HEIGHTS,
-    stiffness_map=(paper.MAP_Z, paper.MAP_Y),
+    stiffness_map=(paper.MAP_TENSIONS, paper.MAP_INSERTIONS),
     fit=True,
 )
 """The paper's grids."""
@@ -247,11 +247,11 @@ def _va_ik(robot, grids, out, opts, say):
 
 
 def _stiffness_map(robot, grids, out, opts, say):
-    z, y = grids["stiffness_map"]
-    m = paper.stiffness_map(robot, z, y)
+    tensions, insertions = grids["stiffness_map"]
+    m = paper.stiffness_map(robot, tensions, insertions)
     plotting.plot_stiffness_map(m, out / "stiffness_map.png")
     gain = 100 * (1 - m.stiffest / m.least_tension)
-    note = f"{np.isfinite(gain).sum()} of {gain.size} in-plane targets reachable with tendons 1, 3 and the tube"
+    note = f"{np.isfinite(gain).sum()} of {gain.size} in-plane targets reached by both, tendons 1 and 3 and the tube"
     return [
         _row("stiffest against least tension: largest compliance reduction", np.nanmax(gain), None, "%", note),
         _row("stiffest against least tension: median compliance reduction", np.nanmedian(gain), None, "%", note),
