@@ -46,7 +46,7 @@ QUICK = dict(
     fig14_insertions=(0.0, 0.07, 0.15),
     table3=((0.0, 10.0), (0.0, 0.12), (0.0, 0.05)),
     vb=((0.0, 0.04), (0.0, 0.08, 0.16)),
-    va_heights=(-0.04, 0.0),
+    va_heights=(-0.04, -0.01),
     stiffness_map=None,
     fit=False,
 )
