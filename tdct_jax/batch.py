@@ -19,10 +19,11 @@ from .checks import check_integer
 
 CHUNK_SIZES = {"cpu": 64, "gpu": 8192}
 """Default configurations per compiled call, by device platform (``chunk_size=`` overrides; a
-smaller batch rounds up to a power of two; other platforms take the cpu value). cpu: 64 measured
-fastest on one device of the 2-core CPU (664 solves/s against 569, 650 and 440 at 16, 256 and
-1,024; benchmarks/sweep_throughput.py). gpu: provisional, near the best batch of a batch-last
-prototype on one H100 (benchmarks/README.md), until benchmarks/gpu_throughput.py measures it."""
+smaller batch rounds up to a power of two; other platforms take the cpu value). cpu: 16 to 256
+lanes measured within the machine's noise of each other for the engine (539-769 solves/s on one
+device of the 2-core CPU, 1,024 points; benchmarks/sweep_throughput.py), 64 kept. gpu:
+provisional, near the best batch of a batch-last prototype on one H100 (benchmarks/README.md),
+until benchmarks/gpu_throughput.py measures it."""
 FIRST_PASS = 12
 """Quasi-Newton steps each lane gets in a chunk's first pass, for kernels that allow it
 (``Kernel.retire``): one Jacobian pass, then Broyden updates, one integration per step, no load
