@@ -95,7 +95,7 @@ def main() -> None:
     scan = compiled_path(robot, load)
     scan(tensions, insertions)
     t = time.perf_counter()
-    scan_tips, scan_iterations, converged = scan(tensions, insertions)
+    scan_tips, scan_iterations, converged = jax.block_until_ready(scan(tensions, insertions))
     scan_s = time.perf_counter() - t
     if not np.all(converged):
         raise RuntimeError("the compiled path did not converge everywhere")
