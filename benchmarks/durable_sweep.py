@@ -54,7 +54,7 @@ def main() -> None:
     args = parser.parse_args()
     n_side, repeats = (13, 1) if args.quick else (27, 3)
     options = dict(grid=grid(n_side), progress=False, throw=False)
-    tdct.sweep(**options | dict(grid=grid(4)))  # compiles the default chunk size (64 lanes)
+    tdct.sweep(**options | dict(grid=grid(4)))  # compiles the default chunk size
     saves, finishes = Clock("save"), Clock("finish")
     memory, streamed, sizes = [], [], []
     with tempfile.TemporaryDirectory(dir=args.folder) as tmp:

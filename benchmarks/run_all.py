@@ -152,6 +152,19 @@ def summary(suffix: str, seconds: dict) -> str:
                 if r["kind"] == "batch"
             ],
         )
+        if sweep.get("outputs"):
+            lines += _table(
+                ("engine output (one device)", "solves/s", "tips only", "cost against tips only (median of pairs)"),
+                [
+                    (
+                        r["output"],
+                        f"{r['with_output_solves_per_s']:.0f}",
+                        f"{r['tips_solves_per_s']:.0f}",
+                        f"{r['cost_ratio']:.2f}x",
+                    )
+                    for r in sweep["outputs"]
+                ],
+            )
     ik = _load("ik", suffix)
     if ik:
         lines += [f"Inverse kinematics against the forward solve ({ik['date']}, load {ik['load'][0]:.1f}):", ""]

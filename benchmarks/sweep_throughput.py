@@ -9,7 +9,8 @@ first pass, then stragglers and failures solved again apart by the full solver) 
 ``--repeats`` times each, and records both medians and the median of the pair-by-pair ratios; the
 first call of each (compile included) is reported apart. Both see the same random envelope points
 (tensions 0-10 N on tendon 1 and, for 30% of the points, tendon 4; insertions 0-160 mm; tip masses
-0-50 g). Then the engine's chunk size on one device. Each row also records the largest tip
+0-50 g). Then the engine's chunk size on one device and on all, and its cost with shapes or the compliance
+requested against tips only (one device). Each row also records the largest tip
 difference between the two over the converged points, whether their result codes agree, and the
 process's peak resident memory so far. Writes benchmarks/results/sweep_throughput[_quick].json.
 """
@@ -51,18 +52,26 @@ def sweep(robot, points, first_pass, **options):
         batch.FIRST_PASS = ENGINE_FIRST_PASS
 
 
-def side_by_side(robot, points, repeats: int, **options) -> dict:
-    """The engine and the plain path on the same points, alternately."""
-    first, times, results = {}, {"engine": [], "plain": []}, {}
-    for name, fp in (("engine", ENGINE_FIRST_PASS), ("plain", None)):
+def timed(robot, points, repeats: int, variants: dict) -> tuple[dict, dict, dict]:
+    """Each variant (name -> (first_pass, sweep options)) on the same points, alternately:
+    first-call seconds, the repeats' seconds and the results, by name."""
+    first, times, results = {}, {name: [] for name in variants}, {}
+    for name, (fp, options) in variants.items():
         t = time.perf_counter()
         results[name] = sweep(robot, points, fp, **options)
         first[name] = time.perf_counter() - t
     for _ in range(repeats):
-        for name, fp in (("engine", ENGINE_FIRST_PASS), ("plain", None)):
+        for name, (fp, options) in variants.items():
             t = time.perf_counter()
             sweep(robot, points, fp, **options)
             times[name].append(time.perf_counter() - t)
+    return first, times, results
+
+
+def side_by_side(robot, points, repeats: int, **options) -> dict:
+    """The engine and the plain path on the same points, alternately."""
+    variants = {"engine": (ENGINE_FIRST_PASS, options), "plain": (None, options)}
+    first, times, results = timed(robot, points, repeats, variants)
     n = len(points["insertion"])
     e, p = results["engine"], results["plain"]
     ok = e.converged & p.converged
@@ -82,6 +91,30 @@ def side_by_side(robot, points, repeats: int, **options) -> dict:
     )
 
 
+def output_cost(robot, points, repeats: int, devices) -> list[dict]:
+    """The engine's cost with shapes or the compliance requested, against tips only, alternately."""
+    rows = []
+    for extra in ("shapes", "compliance"):
+        variants = {
+            "tips": (ENGINE_FIRST_PASS, dict(devices=devices)),
+            extra: (ENGINE_FIRST_PASS, {extra: True, "devices": devices}),
+        }
+        _, times, _ = timed(robot, points, repeats, variants)
+        n = len(points["insertion"])
+        rows.append(
+            dict(
+                output=extra,
+                devices=len(devices),
+                batch=n,
+                tips_solves_per_s=n / float(np.median(times["tips"])),
+                with_output_solves_per_s=n / float(np.median(times[extra])),
+                cost_ratio=float(np.median(np.array(times[extra]) / np.array(times["tips"]))),
+            )
+        )
+        print(rows[-1], flush=True)
+    return rows
+
+
 def load() -> str:
     return Path("/proc/loadavg").read_text().split()[0] if Path("/proc/loadavg").exists() else "?"
 
@@ -99,7 +132,7 @@ def main() -> None:
     device_sets = [devices[:1]] + ([devices] if len(devices) > 1 else [])
     batches = (128,) if args.quick else (256, 1024, 4096)
     failing_batch = 128 if args.quick else 512  # the plain path crawls through failures: a smaller batch
-    chunks = (32, 64) if args.quick else (16, 32, 64, 128, 256)
+    chunks = (64, 256) if args.quick else (32, 64, 128, 256, 512)
     load_before = load()
 
     rows = []
@@ -108,11 +141,14 @@ def main() -> None:
             rec = side_by_side(robot, envelope(b, failing), repeats, devices=devs)
             rows.append(dict(kind="batch", devices=len(devs), batch=b, failing=failing, chunk=None, **rec))
             print(rows[-1], flush=True)
-    chunk_batch = 256 if args.quick else 1024
-    for c in chunks:
-        rec = side_by_side(robot, envelope(chunk_batch), repeats, devices=devices[:1], chunk_size=c)
-        rows.append(dict(kind="chunk", devices=1, batch=chunk_batch, failing=0.0, chunk=c, **rec))
-        print(rows[-1], flush=True)
+    chunk_batch = 256 if args.quick else 2048
+    for devs in device_sets:
+        for c in chunks:
+            rec = side_by_side(robot, envelope(chunk_batch), repeats, devices=devs, chunk_size=c)
+            rows.append(dict(kind="chunk", devices=len(devs), batch=chunk_batch, failing=0.0, chunk=c, **rec))
+            print(rows[-1], flush=True)
+
+    outputs = output_cost(robot, envelope(chunk_batch), repeats, devices[:1])
 
     name = f"sweep_throughput{'_quick' if args.quick else ''}.json"
     write_result(
@@ -123,6 +159,7 @@ def main() -> None:
         repeats=repeats,
         load_average_1min=[load_before, load()],
         rows=rows,
+        outputs=outputs,
     )
     print(f"{'kind':<6} {'dev':>3} {'batch':>6} {'fail':>5} {'chunk':>5} {'engine/s':>9} {'plain/s':>8} {'ratio':>6} tip diff")
     for r in rows:
@@ -130,6 +167,10 @@ def main() -> None:
         print(
             f"{r['kind']:<6} {r['devices']:>3} {r['batch']:>6} {r['failing']:>5.0%} {r['chunk'] or '-':>5}"
             f" {r['engine_solves_per_s']:>9.0f} {r['plain_solves_per_s']:>8.0f} {r['speedup']:>6.2f} {diff}"
+        )
+    for r in outputs:
+        print(
+            f"with {r['output']}: {r['with_output_solves_per_s']:.0f} solves/s against {r['tips_solves_per_s']:.0f}, {r['cost_ratio']:.2f}x"
         )
 
 

@@ -17,13 +17,13 @@ from tqdm import tqdm
 from . import status
 from .checks import check_integer
 
-CHUNK_SIZES = {"cpu": 64, "gpu": 8192}
+CHUNK_SIZES = {"cpu": 256, "gpu": 8192}
 """Default configurations per compiled call, by device platform (``chunk_size=`` overrides; a
-smaller batch rounds up to a power of two; other platforms take the cpu value). cpu: 16 to 256
-lanes measured within the machine's noise of each other for the engine (539-769 solves/s on one
-device of the 2-core CPU, 1,024 points; benchmarks/sweep_throughput.py), 64 kept. gpu:
-provisional, near the best batch of a batch-last prototype on one H100 (benchmarks/README.md),
-until benchmarks/gpu_throughput.py measures it."""
+smaller batch rounds up to a power of two; other platforms take the cpu value). cpu: measured for
+the engine on the 2-core CPU (benchmarks/sweep_throughput.py, 2026-11-25): 256 against 64 was
+765 against 645 solves/s on one device and 1,596 against 1,254 on two; 128 and 512 within a few
+percent of 256. gpu: provisional, near the best batch of a batch-last prototype on one H100
+(benchmarks/README.md), until benchmarks/gpu_throughput.py measures it."""
 FIRST_PASS = 12
 """Quasi-Newton steps each lane gets in a chunk's first pass, for kernels that allow it
 (``Kernel.retire``): one Jacobian pass, then Broyden updates, one integration per step, no load

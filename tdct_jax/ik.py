@@ -26,6 +26,7 @@ conditions at the solution (``jax.jacfwd`` through ``inverse_kinematics``).
 from __future__ import annotations
 
 import functools
+import inspect
 import itertools
 from typing import NamedTuple
 
@@ -647,6 +648,11 @@ def starts(v0, prob: Problem, plan: Plan):
 
 STARTS = 5
 """Phase 1's starts: the given one, then four fresh ones (``starts``)."""
+CHUNK_SIZE = 64
+"""Targets per compiled call of a batched IK on the CPU (other platforms: ``batch.CHUNK_SIZES``).
+Targets that miss from their first start run again from every start, padded to this many lanes so
+as to reuse the compiled program: a round trip over 1,000 targets took 81 s at 256 lanes against
+55 s at 64 (tests/test_ik.py, compile included)."""
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(4, 5, 6))
@@ -797,23 +803,7 @@ def inverse_kinematics(
     Returns:
         IKResult.
     """
-    prob, plan, v0, wrench0 = _problem(
-        robot,
-        target,
-        load,
-        tendons,
-        insertion,
-        bounds,
-        objective,
-        direction,
-        preferred_insertion,
-        guess,
-        method,
-        tol,
-        max_steps,
-        gravity,
-        solver,
-    )
+    prob, plan, v0, wrench0 = _problem(**_arguments(**locals()))
     run = functools.partial(_solve_ik, tol=float(tol), max_steps=int(max_steps))
     if jnp.ndim(prob.target.position) == 2:
         result = _batched(run, prob, plan, v0, wrench0)
@@ -837,12 +827,13 @@ def _batched(run, prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
     points = {f"in{i}": np.asarray(leaves[i]) for i in own} | {"v0": np.asarray(v0)}
     kernel = Kernel(_ik_point, (("plan", plan), ("tree", tree), ("own", own)) + tuple(run.keywords.items()))
     base = (prob._replace(target=None, load=None if loads else prob.load), wrench0, leaves)
-    out = run_batched(kernel, base, points | {"starts": np.ones(len(v0), np.int32)}, progress=False)
+    chunk = CHUNK_SIZE if jax.default_backend() == "cpu" else default_chunk_size()
+    out = run_batched(kernel, base, points | {"starts": np.ones(len(v0), np.int32)}, chunk_size=chunk, progress=False)
     again = np.flatnonzero(out[".result"] != status.SUCCESS)
     if again.size:  # padded to the first pass's chunk, whose compiled program it reuses
-        rows = np.concatenate([again, np.full(max(lanes_per_call(len(v0), default_chunk_size()) - again.size, 0), again[-1])])
+        rows = np.concatenate([again, np.full(max(lanes_per_call(len(v0), chunk) - again.size, 0), again[-1])])
         retry = {k: v[rows] for k, v in points.items()} | {"starts": np.full(rows.size, STARTS, np.int32)}
-        for k, v in run_batched(kernel, base, retry, progress=False).items():
+        for k, v in run_batched(kernel, base, retry, chunk_size=chunk, progress=False).items():
             out[k][again] = v[: again.size]
     shape = jax.eval_shape(
         lambda: run(_one(prob, jax.tree.map(lambda a: a[0] if jnp.ndim(a) else a, per)), v0[0], wrench0, plan)[0]
@@ -882,8 +873,9 @@ def track(robot: Robot, targets: Target, **options) -> IKResult:
     leaves, tree = jax.tree.flatten(targets)
     own = tuple(i for i, leaf in enumerate(leaves) if jnp.ndim(leaf) >= 1)  # the rest (weights) are shared
     first = jax.tree.unflatten(tree, [leaf[0] if i in own else leaf for i, leaf in enumerate(leaves)])
-    prob, plan, v0, wrench0 = _problem(robot, first, **_ik_options(options))
-    tol, max_steps = float(options.get("tol", TOL)), int(options.get("max_steps", MAX_STEPS))
+    args = _arguments(robot, first, **options)
+    prob, plan, v0, wrench0 = _problem(**args)
+    tol, max_steps = float(args["tol"]), int(args["max_steps"])
     result = _track(prob, leaves, v0, wrench0, plan, tol, max_steps, tree, own)
     _check(result, throw, max_steps)
     return result
@@ -902,41 +894,11 @@ def _track(prob, leaves, v0, wrench0, plan, tol, max_steps, tree, own):
     return lax.scan(step, (v0, wrench0), [leaves[i] for i in own])[1]
 
 
-def _ik_options(options: dict) -> dict:
-    names = (
-        "load",
-        "tendons",
-        "insertion",
-        "bounds",
-        "objective",
-        "direction",
-        "preferred_insertion",
-        "guess",
-        "method",
-        "tol",
-        "max_steps",
-        "gravity",
-        "solver",
-    )
-    unknown = sorted(set(options) - set(names))
-    if unknown:
-        raise TypeError(f"unknown argument(s) {unknown}; allowed: {sorted(names)} and throw")
-    defaults = dict(
-        load=None,
-        tendons=None,
-        insertion=None,
-        bounds=Bounds(),
-        objective=None,
-        direction=None,
-        preferred_insertion=None,
-        guess=None,
-        method="augmented",
-        tol=TOL,
-        max_steps=MAX_STEPS,
-        gravity=STANDARD_GRAVITY,
-        solver=DEFAULT_SOLVER,
-    )
-    return defaults | options
+def _arguments(*args, **kwargs) -> dict:
+    """``inverse_kinematics``'s arguments but ``throw``, bound to its signature, defaults filled."""
+    bound = inspect.signature(inverse_kinematics).bind(*args, **kwargs)
+    bound.apply_defaults()
+    return {name: value for name, value in bound.arguments.items() if name != "throw"}
 
 
 def _check(result: IKResult, throw: bool, max_steps: int) -> None:
@@ -948,6 +910,7 @@ def _check(result: IKResult, throw: bool, max_steps: int) -> None:
 def _problem(
     robot,
     target,
+    *,
     load,
     tendons,
     insertion,
