@@ -524,14 +524,17 @@ def optimise(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
         kkt_trial = _kkt_residual(trial.dphi, trial.G, v + s, prob)  # unscaled: compared with its own kind
         scale = jnp.where(first, jnp.maximum(jnp.abs(trial.phi), 1e-300), scale)
         m, m_t = merit(ev, scale, rho), merit(trial, scale, rho)
-        # at the optimum the merit stops resolving progress (round-off); there a step is taken
-        # when it brings the first-order optimality residual down
-        flat = (jnp.abs(m_t - m) <= 1e-13 * jnp.abs(m)) & (jnp.max(jnp.abs(trial.e)) <= tol)
-        sharper = kkt_trial < kkt
+        # with the task met to its tolerance before and after, the merit's penalty term measures the
+        # forward solve's round-off, not progress: there a step is taken when it lowers the
+        # objective or the first-order optimality residual
+        settled = (jnp.max(jnp.abs(trial.e)) <= tol) & (jnp.max(jnp.abs(ev.e)) <= tol)
+        progress = (trial.phi <= ev.phi) | (kkt_trial < kkt)
         near = jnp.max(jnp.abs(trial.e)) <= jnp.maximum(jnp.max(jnp.abs(ev.e)), DRIFT)
-        better = first | (near & ((m_t <= m - 1e-15 * jnp.abs(m)) | (flat & sharper)))
+        better = first | (near & ((m_t <= m - 1e-15 * jnp.abs(m)) | (settled & progress)))
         y = (trial.dphi - ev.dphi) / scale + (trial.G - ev.G).T @ lam
-        H = jnp.where(better & ~first & ~corrected, _damped_bfgs(H, s, y), H)
+        H = jnp.where(better & ~first, _damped_bfgs(H, s, y), H)  # s: the whole step, corrected or not
+        # the first Hessian: a multiple of the identity whose first step moves the inputs by about a tenth
+        H = jnp.where(first, jnp.maximum(1.0, 10 * jnp.max(jnp.abs(trial.dphi)) / scale) * jnp.eye(n), H)
         # a rejected step is tried once more with a second-order correction back onto the task
         # manifold, c = least-squares solution of e(v + s) + G(v + s) c = 0 (the Maratos effect:
         # on a curved manifold the l1 merit rejects good SQP steps)
