@@ -34,6 +34,9 @@ solve's. None: one pass with the full solver. benchmarks/sweep_throughput.py mea
 RETRY_LANES = 8
 """Most configurations per compiled call of the second pass (fewer lanes, rounded up to a power of
 two, when fewer need it: a padded lane costs a whole solve)."""
+RETRY_CHUNKS = 4
+"""Most chunks whose unconverged points wait to be solved again together (``iter_batched``): more
+fill the second pass's lanes better, but hold back finished chunks (and their durable saves)."""
 AXIS = "batch"
 """Name of the device-mesh axis the batch is sharded over."""
 
@@ -109,18 +112,24 @@ def iter_batched(
     skip: Collection[int] = (),
 ) -> Iterator[tuple[int, dict]]:
     """Runs ``kernel`` over the leading axis of ``points`` in chunks, yielding each chunk's
-    (first row, numpy outputs) as soon as it is computed, with the next chunk already dispatched.
+    (first row, numpy outputs) in order, as soon as it is complete, with the next chunk already
+    dispatched.
 
     Every chunk has the same static shape (the last is padded by repeating its final point), so
     one compile serves the whole batch and any later one with the same chunk size.
     ``chunk_size`` None takes ``default_chunk_size`` for the kernel's devices. ``per_point`` is
     the number of solves each point stands for (the progress bar counts solves). ``skip``: indices
     of chunks (see ``chunk_lanes``) not to compute, done before; the progress bar starts at them.
+
+    Two passes (``Kernel.retire``): the points a chunk's first pass leaves unconverged wait, with
+    their chunk, until RETRY_LANES of them (or RETRY_CHUNKS chunks) have gathered, then are solved
+    again together, so that one call of the full solver serves the stragglers of several chunks.
     """
     n = len(next(iter(points.values())))
     chunk = chunk_lanes(kernel, n, chunk_size)
+    n_devices = 1 if kernel.mesh is None else kernel.mesh.size
     # one device: commit the points to it, so jit runs there and not on the default device
-    device = kernel.mesh.devices.flat[0] if kernel.mesh is not None and kernel.mesh.size == 1 else None
+    device = kernel.mesh.devices.flat[0] if kernel.mesh is not None and n_devices == 1 else None
     two_pass = kernel.retire and FIRST_PASS is not None
     first = dataclasses.replace(kernel, options=kernel.options + (("first_pass", FIRST_PASS),)) if two_pass else kernel
 
@@ -131,20 +140,33 @@ def iter_batched(
             chunk_points = jax.device_put(chunk_points, device)
         return _run_chunk(base, chunk_points, kernel)
 
-    def fetched(start, out):
+    waiting: list[tuple[int, dict, np.ndarray]] = []  # (first row, outputs, rows to solve again), in order
+
+    def finished(start, out, last):
+        """The chunks complete once this one joins the waiting ones, in order."""
         m = min(chunk, n - start)
         out = {k: np.array(v[:m]) for k, v in jax.device_get(out).items()}  # writable: retried lanes go in
-        if two_pass:
-            again = np.flatnonzero(out["result"] != status.SUCCESS)
-            lanes = min(chunk, lanes_per_call(len(again), RETRY_LANES, 1 if kernel.mesh is None else kernel.mesh.size))
-            for group in np.array_split(again, -(-len(again) // lanes)) if len(again) else ():
-                bar.set_postfix_str(f"solving {len(again)} apart")
-                retried = jax.device_get(run(kernel, start + group, lanes))
-                for k, v in out.items():
-                    v[group] = retried[k][: len(group)]
-        bar.update(m * per_point)
+        again = np.flatnonzero(out["result"] != status.SUCCESS) if two_pass else np.zeros(0, int)
+        waiting.append((start, out, again))
+        rows = np.concatenate([s + a for s, _, a in waiting])
+        if rows.size and not (last or rows.size >= RETRY_LANES or len(waiting) >= RETRY_CHUNKS):
+            return []
+        if rows.size:
+            bar.set_postfix_str(f"solving {rows.size} apart")
+            lanes = min(chunk, lanes_per_call(rows.size, RETRY_LANES, n_devices))
+            groups = np.array_split(rows, -(-rows.size // lanes))
+            parts = [jax.device_get(run(kernel, g, lanes)) for g in groups]
+            retried = joined([{k: v[: len(g)] for k, v in p.items()} for p, g in zip(parts, groups, strict=True)])
+            offset = 0
+            for _, o, a in waiting:
+                for k, v in o.items():
+                    v[a] = retried[k][offset : offset + len(a)]
+                offset += len(a)
+        done = [(s, o) for s, o, _ in waiting]
+        waiting.clear()
+        bar.update(sum(min(chunk, n - s) for s, _ in done) * per_point)
         bar.set_postfix_str("")
-        return start, out
+        return done
 
     starts = [start for start in range(0, n, chunk) if start // chunk not in skip]
     done = n - sum(min(chunk, n - start) for start in starts)
@@ -156,10 +178,10 @@ def iter_batched(
         for start in starts:
             out = run(first, np.arange(start, min(start + chunk, n)), chunk)  # runs while the last chunk is fetched
             if pending is not None:
-                yield fetched(*pending)
+                yield from finished(*pending, last=False)
             pending = start, out
         if pending is not None:
-            yield fetched(*pending)
+            yield from finished(*pending, last=True)
 
 
 def run_batched(kernel: Kernel, base, points: dict, **options) -> dict:

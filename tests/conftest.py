@@ -38,6 +38,21 @@ def robot():
     return tdct.Robot()
 
 
+HEIGHT, MASS = 0.03, 0.02
+"""A tip height [m] reached with tendon 1 and the tube, holding a tip mass [kg]: the README's and
+the notebook's redundancy example."""
+
+
+@pytest.fixture(scope="session")
+def stiffest(robot):
+    """The stiffest way along -y to hold the tip at HEIGHT with MASS, tendon 1 and the tube (session
+    scope: its program takes tens of seconds to compile, and module fixtures are rebuilt whenever a
+    worker comes back to their module)."""
+    target = tdct.Target((0.0, HEIGHT, 0.0), axes="y")
+    options = dict(load=tdct.TipLoad.from_mass(MASS), tendons=(1,), objective="stiffness", direction=(0.0, -1.0, 0.0))
+    return tdct.inverse_kinematics(robot, target, **options)
+
+
 @pytest.fixture(scope="session")
 def paper_case(robot):
     """The paper's Fig. 6 setting: 6 N on tendon 1, 80 mm of tube, 20 g at the tip."""

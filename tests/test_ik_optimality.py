@@ -5,17 +5,9 @@ Jacobians, central differences."""
 import jax
 import numpy as np
 import pytest
+from conftest import HEIGHT, MASS
 
 import tdct_jax as tdct
-
-HEIGHT, MASS = 0.03, 0.02  # a tip height reached with tendon 1 and the tube, 20 g held
-
-
-@pytest.fixture(scope="module")
-def stiffest(robot):
-    target = tdct.Target((0.0, HEIGHT, 0.0), axes="y")
-    options = dict(load=tdct.TipLoad.from_mass(MASS), tendons=(1,), objective="stiffness", direction=(0.0, -1.0, 0.0))
-    return tdct.inverse_kinematics(robot, target, **options)
 
 
 def test_stiffest_solution_beats_every_solution_of_a_1_mm_insertion_scan(robot, stiffest):
@@ -74,3 +66,24 @@ def test_actuation_derivative_in_the_target_matches_central_differences(robot):
         ]
     )
     assert np.abs(exact - fd).max() <= 1e-6 * np.abs(fd).max()
+
+
+@pytest.mark.parametrize(
+    "made_by", [((2.0, 0.0, 1.0, 0.0), 0.10), ((3.0, 0.0, 1.0, 0.0), 0.08)], ids=["2 N, 100 mm", "3 N, 80 mm"]
+)
+def test_least_tension_with_two_opposed_tendons_is_reached_and_first_order_optimal(robot, made_by):
+    """An in-plane target made by tendon 1 against 1 N on tendon 3 (reachable by construction), re-solved
+    with tendons 1 and 3 and the tube free (two task rows, three inputs) for the least total squared
+    tension: reached, and the objective's gradient 2 tau has no component along the task's null space,
+    computed from the public kinematic Jacobian. (Phase 2 once ran out of steps on such targets.)"""
+    tip = np.asarray(tdct.solve(robot, tdct.Actuation(*made_by)).tip_position)
+    result = tdct.inverse_kinematics(robot, tdct.Target(tip, axes="yz"), tendons=(1, 3), objective="tension", throw=False)
+    assert int(result.result) == tdct.status.SUCCESS and float(result.position_error) < 1e-9
+    tau, depth = np.asarray(result.actuation.tensions), float(result.actuation.insertion)
+    assert 0 < tau[0] < 10 and 0 < tau[2] < 10 and 0 < depth < 0.16  # no bound active: the plain Lagrange condition
+    scale = np.array([10.0, 10.0, 0.16])  # the inputs' ranges
+    G = np.asarray(tdct.kinematic_jacobian(robot, result.actuation))[1:3][:, [0, 2, 4]] * scale  # d tip (y, z) / d inputs
+    grad = np.array([2 * tau[0], 2 * tau[2], 0.0]) * scale
+    null = np.linalg.svd(G)[2][-1]
+    assert abs(grad @ null) <= 1e-6 * np.linalg.norm(grad)
+    assert sum(tau**2) <= sum(np.square(made_by[0])) * (1 + 1e-9)  # no worse than the actuation that made it
