@@ -20,7 +20,7 @@ import numpy as np
 from _common import peak_rss_mb, write_result
 
 import tdct_jax as tdct
-from tdct_jax.batch import CHUNK_SIZES
+from tdct_jax.batch import default_chunk_size, mesh_for
 from tdct_jax.checkpoint import Partial
 
 
@@ -71,7 +71,7 @@ def main() -> None:
     in_memory_s, to_file_s = float(np.median(memory)), float(np.median(streamed))
     result = dict(
         points=points,
-        chunk_size=CHUNK_SIZES["cpu"],
+        chunk_size=default_chunk_size(mesh_for(None)),
         chunks=chunks,
         repeats=repeats,
         in_memory_s=in_memory_s,

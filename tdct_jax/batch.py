@@ -17,12 +17,13 @@ from tqdm import tqdm
 from . import status
 from .checks import check_integer
 
-CHUNK_SIZES = {"cpu": 256, "gpu": 8192}
-"""Default configurations per compiled call, by device platform (``chunk_size=`` overrides; a
-smaller batch rounds up to a power of two; other platforms take the cpu value). cpu: measured for
-the engine on the 2-core CPU (benchmarks/sweep_throughput.py, 2026-11-25): 256 against 64 was
-765 against 645 solves/s on one device and 1,596 against 1,254 on two; 128 and 512 within a few
-percent of 256. gpu: provisional, near the best batch of a batch-last prototype on one H100
+CHUNK_SIZES = {"cpu": 128, "gpu": 8192}
+"""Default configurations per device per compiled call, by device platform (``chunk_size=``, the
+total per call, overrides; a smaller batch rounds up to a power of two; other platforms take the
+cpu value). cpu: measured for the engine on the 2-core CPU (benchmarks/sweep_throughput.py,
+2026-11-25, 2,048 points): 128 lanes per device was the fastest or within the noise of it, on one
+device (804 solves/s; 64: 670, 256: 738, 512: 458) and on two (chunks of 256: 1,576; 512: 1,584;
+128: 1,525). gpu: provisional, near the best batch of a batch-last prototype on one H100
 (benchmarks/README.md), until benchmarks/gpu_throughput.py measures it."""
 FIRST_PASS = 12
 """Quasi-Newton steps each lane gets in a chunk's first pass, for kernels that allow it
@@ -83,9 +84,10 @@ def mesh_for(devices) -> Mesh:
 
 
 def default_chunk_size(mesh: Mesh | None = None) -> int:
-    """``CHUNK_SIZES`` for the platform of the mesh's devices (default: the default backend's)."""
+    """Configurations per compiled call by default: ``CHUNK_SIZES`` for the platform of the mesh's
+    devices, times their number (no mesh: one device of the default backend)."""
     platform = jax.default_backend() if mesh is None else mesh.devices.flat[0].platform
-    return CHUNK_SIZES.get(platform, CHUNK_SIZES["cpu"])
+    return CHUNK_SIZES.get(platform, CHUNK_SIZES["cpu"]) * (1 if mesh is None else mesh.size)
 
 
 def lanes_per_call(n: int, chunk_size: int, n_devices: int = 1) -> int:

@@ -401,8 +401,8 @@ def sweep(
         shapes: also return the full shape of every solution (memory: 2 steps + 1 nodes each).
         compliance: also return the exact 3x3 tip compliance (eq. 41) at every point.
         chunk_size: configurations per compiled call; bounds device memory. None takes the
-            default of the devices' platform (``tdct_jax.batch.CHUNK_SIZES``). With several
-            devices each chunk is split evenly over them.
+            default of the devices' platform per device (``tdct_jax.batch.CHUNK_SIZES``) times
+            the number of devices. With several devices each chunk is split evenly over them.
         progress: show a progress bar on the terminal.
         devices: devices to shard each chunk over (default: this process's, ``jax.local_devices()``).
         out: an .npz path to stream the results to, chunk by chunk, with host memory bounded by
