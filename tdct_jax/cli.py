@@ -208,7 +208,11 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--plot", metavar="ellipse.png", help="save the ellipsoid projected on its two largest axes")
     r = verbs.add_parser("reproduce", parents=[cached], help="regenerate the paper's simulation figures and headline numbers")
     r.add_argument("--out", default="tdct-reproduce", metavar="DIR", help="output folder (default tdct-reproduce)")
-    r.add_argument("--quick", action="store_true", help="coarse grids and no parameter fit (about a minute)")
+    r.add_argument(
+        "--quick",
+        action="store_true",
+        help="coarse grids; no Sec. V.A as inverse kinematics, stiffness map or parameter fit (about 1.5 minutes)",
+    )
     r.add_argument("--robot", metavar="robot.toml", help="TOML file of Robot fields in SI units")
     r.add_argument("--quiet", action="store_true", help="no progress output")
     y = verbs.add_parser(
