@@ -990,6 +990,19 @@ def _problem(
     tol = as_array("tol", tol, ())
     check_range("tol", tol, 0.0, lo_open=True)
     check_integer("max_steps", max_steps)
+    if is_concrete(target.position) and is_concrete(L):
+        note = target_note("target position", np.asarray(target.position)[..., [AXES.index(a) for a in target.axes]], float(L))
+        if note:
+            warn_user(note, UnitWarning)
+    free = len(tendons) + (insertion is None)
+    if objective is not None and free <= target.size:
+        raise ValueError(
+            f"objective = {getattr(objective, '__name__', objective)!r}: nothing to choose: {free} free input(s) "
+            f"(tendons {tendons}{'; the insertion fixed' if insertion is not None else ' and the insertion'}) for {target.size} task "
+            f"coordinate(s) ({describe_task(target)}); an objective picks among solutions only with more free inputs "
+            "than task coordinates: free more tendons (tendons=), leave the insertion free, or give fewer target axes "
+            "(Target(..., axes=...))"
+        )
     scale = jnp.maximum(jnp.asarray(bounds.tension[1]), 1.0)
     lo = [jnp.full(len(tendons), bounds.tension[0]) / scale] + (
         [jnp.reshape(ins_bounds[0] / L, (1,))] if insertion is None else []
@@ -1011,19 +1024,6 @@ def _problem(
         direction=jnp.full(3, jnp.nan) if direction is None else jnp.asarray(direction, float),
     )
     plan = Plan(tuple(t - 1 for t in tendons), insertion is None, objective, method)
-    free = len(tendons) + (insertion is None)
-    if objective is not None and free <= target.size:
-        raise ValueError(
-            f"objective = {getattr(objective, '__name__', objective)!r}: nothing to choose: {free} free input(s) "
-            f"(tendons {tendons}{'; the insertion fixed' if insertion is not None else ' and the insertion'}) for {target.size} task "
-            f"coordinate(s) ({describe_task(target)}); an objective picks among solutions only with more free inputs "
-            "than task coordinates: free more tendons (tendons=), leave the insertion free, or give fewer target axes "
-            "(Target(..., axes=...))"
-        )
-    if is_concrete(target.position) and is_concrete(L):
-        note = target_note("target position", np.asarray(target.position)[..., [AXES.index(a) for a in target.axes]], float(L))
-        if note:
-            warn_user(note, UnitWarning)
     batched = jnp.ndim(target.position) == 2
     if guess is None:
         forces = jnp.broadcast_to(jnp.asarray(load.force), jnp.shape(target.position))
