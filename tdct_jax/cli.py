@@ -203,7 +203,9 @@ def _parser() -> argparse.ArgumentParser:
         help="folder for the shape files (one CSV per experiment); refused if it holds .csv files already "
         "(tdct calibrate DIR would fit them too), unless --overwrite",
     )
-    y.add_argument("--overwrite", action="store_true", help="delete the .csv files already in DIR first (nothing else)")
+    y.add_argument(
+        "--overwrite", action="store_true", help="delete the .csv files already in DIR (nothing else) before writing the new ones"
+    )
     which = y.add_mutually_exclusive_group(required=True)
     which.add_argument(
         "--preset", choices=["paper"], help="paper: Sec. III.B's protocol, tendon 1 at 2, 4, 6, 8, 10 N, no tube, no load"

@@ -2,7 +2,7 @@
 
 A spec, SI units throughout (every key but one table of points is optional)::
 
-    robot = "robot.toml"      # a file of Robot fields beside the spec, or a [robot] table; default Table II
+    # robot = "robot.toml"    # a file of Robot fields beside the spec (it must exist), or a [robot] table; default Table II
     gravity = true            # true (standard, -y), false, or [gx, gy, gz] in m/s^2
     chunk_size = 64           # configurations per compiled call (default: the platform's)
     shapes = false            # also keep every shape / the 3x3 tip compliance
