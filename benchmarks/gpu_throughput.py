@@ -59,7 +59,8 @@ def measure(points: int, chunk: int | None, devices, repeats: int, folder: Path)
     out = folder / "sweep.npz" if points >= STREAMED else None
 
     def run():
-        result = tdct.sweep(batch=batch, chunk_size=chunk, devices=devices, out=out, progress=False)
+        # overwrite: each repeat computes again (the same sweep's finished file is otherwise kept)
+        result = tdct.sweep(batch=batch, chunk_size=chunk, devices=devices, out=out, overwrite=True, progress=False)
         if out is None:
             return result.n_failed
         with np.load(out) as saved:  # reads one array, not the whole result

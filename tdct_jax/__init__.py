@@ -10,6 +10,7 @@ from . import status as status  # noqa: E402
 from .calibrate import Calibration as Calibration  # noqa: E402
 from .calibrate import calibrate as calibrate  # noqa: E402
 from .calibrate import synthesize as synthesize  # noqa: E402
+from .checks import UnitWarning as UnitWarning  # noqa: E402
 from .data import Experiment as Experiment  # noqa: E402
 from .data import read_experiment as read_experiment  # noqa: E402
 from .data import read_experiments as read_experiments  # noqa: E402

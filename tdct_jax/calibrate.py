@@ -246,7 +246,8 @@ def calibrate(
     Args:
         robot: the robot with the starting values of ``params`` and every other field fixed.
         experiments: measured shapes and their conditions (``tdct_jax.data.read_experiments``).
-        params: scalar Robot fields to fit, e.g. ("E_silicone", "tendon_offset").
+        params: scalar Robot fields to fit, e.g. ("E_silicone", "tendon_offset"); a single
+            name may be given as a string ("E_silicone").
         max_steps: most Levenberg-Marquardt trial steps (the fit's own limit).
         xtol: converged when the Gauss-Newton step changes no field by more than this (relative
             for log-space fields, absolute for Poisson ratios): the fit's own tolerance.
@@ -263,7 +264,7 @@ def calibrate(
         ValueError: unknown or repeated params, no experiments, experiments that do not fit the robot.
         ConvergenceError: with ``throw=True``, when the fit did not converge.
     """
-    params = tuple(params)
+    params = _as_names(params)
     _check_params(robot, params)
     experiments = list(experiments)
     if not experiments or not all(isinstance(e, Experiment) for e in experiments):
@@ -321,6 +322,16 @@ def calibrate(
     )
     status.check(fit.result, throw=throw, what=f"the calibration of {', '.join(params)}", max_steps=max_steps)
     return result
+
+
+def _as_names(params) -> tuple:
+    """A field name, or a sequence of them, as a tuple of names (a string is one name)."""
+    if isinstance(params, str):
+        return (params,)
+    try:
+        return tuple(params)
+    except TypeError:
+        raise ValueError(f"params = {params!r} must be a Robot field name or a sequence of them") from None
 
 
 def _check_params(robot: Robot, params: tuple) -> None:

@@ -5,7 +5,9 @@ the output .npz assembled from the chunks with deterministic bytes.
 The folder ``<stem>.partial/`` holds ``manifest.json`` (the fingerprint and the number of chunks,
 written once) and ``chunk-<i>.npz`` per finished chunk. A chunk file is written under a temporary
 name, flushed to the disk and renamed, so a chunk counts as done exactly when its file exists:
-a stop at any moment (SIGKILL, time limit, out of memory, Ctrl-C) leaves only whole chunks.
+a stop at any moment (SIGKILL, time limit, out of memory, Ctrl-C) leaves only whole chunks. The
+assembled file carries the fingerprint as its zip comment (``np.load`` ignores it), so that the
+same sweep run again finds it complete.
 """
 
 from __future__ import annotations
@@ -25,6 +27,9 @@ from pathlib import Path
 import numpy as np
 
 MANIFEST = "manifest.json"
+EXECUTION = ("chunk_size", "devices")
+"""Fingerprint entries that change how a sweep runs, not what its finished file means: a complete
+file counts as the same sweep whatever they were."""
 CHUNK = re.compile(r"chunk-(\d+)\.npz")
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 """Timestamp of every member of an assembled .npz, so that equal arrays give equal file bytes."""
@@ -104,11 +109,43 @@ def _durable(tmp: Path, final: Path, write) -> None:
     _fsync_dir(final.parent)
 
 
+def written_fingerprint(path) -> dict | None:
+    """The fingerprint an assembled file carries (its zip comment), or None (not such a file)."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            return json.loads(archive.comment.decode()) if archive.comment else None
+    except (OSError, zipfile.BadZipFile, ValueError):
+        return None
+
+
+def complete(path, fingerprint: Mapping, *, overwrite: bool = False) -> bool:
+    """True when ``path`` is there, assembled by the same sweep (equal fingerprint but for
+    ``EXECUTION``) and no partial folder is being filled for it: nothing to compute. False when
+    it is not there, with ``overwrite``, or while a partial folder exists (its run goes on).
+
+    Raises:
+        ValueError: ``path`` is there but holds another sweep (naming what differs) or a file no
+            sweep assembled.
+    """
+    path = Path(path)
+    if overwrite or not path.is_file() or partial_path(path).exists():
+        return False
+    old = written_fingerprint(path)
+    again = "; to replace it pass overwrite=True (tdct sweep --overwrite), or write to another out= path"
+    if old is None:
+        raise ValueError(f"{path} is there already but was not assembled by tdct.sweep (no sweep fingerprint){again}")
+    new = json.loads(json.dumps(dict(fingerprint)))
+    changes = differences(*({k: v for k, v in f.items() if k not in EXECUTION} for f in (old, new)))
+    if changes:
+        raise ValueError(f"{path} holds a different, finished sweep ({'; '.join(changes)}){again}")
+    return True
+
+
 class Partial:
     """The partial folder of one output file (a sweep's, or one process's part of it)."""
 
-    def __init__(self, folder: Path, chunks: int, done: set[int]):
-        self.folder, self.chunks, self.done = folder, chunks, frozenset(done)
+    def __init__(self, folder: Path, chunks: int, done: set[int], fingerprint: Mapping):
+        self.folder, self.chunks, self.done, self.fingerprint = folder, chunks, frozenset(done), fingerprint
 
     @classmethod
     def open(cls, path, fingerprint: Mapping, chunks: int, *, overwrite: bool = False) -> Partial:
@@ -140,7 +177,7 @@ class Partial:
             folder.mkdir(exist_ok=True)
             text = json.dumps(dict(output=path.name, chunks=chunks, fingerprint=fingerprint), indent=1).encode()
             _durable(folder / f"{MANIFEST}.tmp", folder / MANIFEST, lambda f: f.write(text))
-            return cls(folder, chunks, set())
+            return cls(folder, chunks, set(), fingerprint)
         changes = differences(manifest["fingerprint"], fingerprint)
         if changes:
             raise ValueError(
@@ -150,7 +187,7 @@ class Partial:
         done = _done(folder)
         if done:
             print(f"resuming from {folder}: {len(done)} of {chunks} chunks done", file=sys.stderr)
-        return cls(folder, chunks, done)
+        return cls(folder, chunks, done, fingerprint)
 
     def _chunk(self, i: int) -> Path:
         return self.folder / f"chunk-{i:06d}.npz"
@@ -167,7 +204,8 @@ class Partial:
     def finish(self, path, head: Mapping, shape: tuple, tail: Mapping) -> Path:
         """Writes ``path``, an uncompressed .npz of ``head``'s arrays, then each array of the
         chunks joined along their leading axis and reshaped to ``shape`` + its trailing axes, then
-        ``tail``'s arrays; removes the folder. Host memory holds one chunk's array at a time."""
+        ``tail``'s arrays, with the fingerprint as the archive's comment; removes the folder. Host
+        memory holds one chunk's array at a time."""
         path = Path(path)
         missing = sorted(set(range(self.chunks)) - _done(self.folder))
         if missing:
@@ -177,6 +215,7 @@ class Partial:
 
         def write(f):
             with zipfile.ZipFile(f, "w", zipfile.ZIP_STORED) as archive:
+                archive.comment = json.dumps(self.fingerprint, sort_keys=True).encode()
                 for name, v in head.items():
                     _member(archive, name, v.shape, v.dtype, [v])
                 for name, v in templates.items():

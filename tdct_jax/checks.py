@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import math
 import numbers
+import sys
+import tempfile
+import warnings
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -83,3 +87,113 @@ def num(v: float) -> str:
 def fmt(a) -> str:
     a = np.asarray(a)
     return f"{a.item():g}" if a.ndim == 0 else np.array2string(a, separator=", ")
+
+
+def check_output(
+    name: str, path, folder: bool = False, suffixes: tuple[str, ...] | None = None, kind: str = "a format this output takes"
+) -> None:
+    """Before any computation: an output file's folder (or an output folder's nearest existing
+    ancestor, which it will be made in) exists and takes a new file, and a file's suffix is one of
+    ``suffixes`` (lowercase, with the dot; "" allows none) when given, ``kind`` saying what they
+    are. A ValueError names the flag (``name`` starting with "-") or the argument (``out =
+    '...'``) and the path otherwise."""
+    path = Path(path)
+    label = f"{name} {path}" if name.startswith("-") else f"{name} = {str(path)!r}"
+    if suffixes is not None and path.suffix.lower() not in suffixes:
+        allowed = ", ".join(s or "none" for s in suffixes)
+        raise ValueError(f"{label}: {path.suffix or 'no suffix'} is not {kind}; allowed: {allowed}")
+    if not folder and path.is_dir():
+        raise ValueError(f"{label}: is a folder, expected a file name")
+    if folder and path.exists() and not path.is_dir():
+        raise ValueError(f"{label}: is a file, expected a folder")
+    where = path if folder and path.is_dir() else path.parent
+    if not folder and not where.is_dir():
+        raise ValueError(f"{label}: the folder {where} does not exist")
+    while folder and not where.exists():
+        where = where.parent
+    try:
+        with tempfile.TemporaryFile(dir=where):
+            pass
+        if not folder and path.exists():
+            path.open("a").close()
+    except OSError as e:
+        raise ValueError(f"{label}: cannot write a file in {where} ({e.strerror or e})") from None
+
+
+class UnitWarning(UserWarning):
+    """A value far outside any robot's range, as if typed in another unit: a note, not an error."""
+
+
+MILLIMETRES = ((1e-3, "millimetres"),)
+PLAUSIBLE = {
+    # name: (SI unit, lowest, highest, typical, other units it may have been typed in: (1 of them in SI, name))
+    "length": ("m", 5e-3, 5.0, 0.16, ((1e-3, "millimetres"), (1e-2, "centimetres"))),
+    "outer_diameter": ("m", 0.0, 0.5, 0.02, MILLIMETRES),
+    "channel_diameter": ("m", 0.0, 0.5, 1.5e-3, MILLIMETRES),
+    "tendon_offset": ("m", 0.0, 0.5, 7e-3, MILLIMETRES),
+    "tendon_channel_diameter": ("m", 0.0, 0.5, 1e-3, MILLIMETRES),
+    "tube_outer_diameter": ("m", 0.0, 0.5, 1.4e-3, MILLIMETRES),
+    "tube_inner_diameter": ("m", 0.0, 0.5, 1.1e-3, MILLIMETRES),
+    "E_silicone": ("Pa", 1e3, 1e9, 1e6, ((1e6, "MPa"), (1e9, "GPa"), (1e3, "kPa"))),
+    "E_tube": ("Pa", 1e7, 1e12, 1e11, ((1e6, "MPa"), (1e9, "GPa"), (1e3, "kPa"))),
+    "density_silicone": ("kg/m^3", 100.0, 3e4, 1500.0, ((1e3, "g/cm^3"),)),
+    "density_tube": ("kg/m^3", 100.0, 3e4, 6500.0, ((1e3, "g/cm^3"),)),
+    "gravity": ("m/s^2", 0.0, 100.0, 9.81, ((1e-3, "mm/s^2"),)),
+}
+"""Magnitudes far outside any TDCT-like robot, by field (gravity: the vector's magnitude): there a
+value is no error but gets a UnitWarning naming the unit it was probably typed in (of several that
+would make it plausible, the one that lands nearest the typical value, in decades). Zero is never
+flagged. The one place for these ranges."""
+
+
+TARGET_REACH = (0.01, 10.0)
+"""Distances of a tip target from the base, in robot lengths, outside which (but for 0) a target was
+probably typed in another unit: no tip gets there (a note, not an error; the IK answers with the
+nearest pose)."""
+
+
+def target_note(name: str, position, length: float, typed_in_mm: bool = False) -> str | None:
+    """A note for tip target(s) ``position`` [m] (the counted components; any leading axes) that
+    lie farther than ``TARGET_REACH`` robot lengths from the base, as if typed in millimetres, or,
+    for values typed in millimetres (``typed_in_mm``), nearer than its lower end, as if typed in
+    metres; None otherwise."""
+    d = np.linalg.norm(np.atleast_2d(np.asarray(position, dtype=float)), axis=-1)
+    lo, hi = TARGET_REACH
+    far, near = d.max() / length, d[d > 0].min(initial=np.inf) / length
+    if not typed_in_mm and far > hi:
+        return (
+            f"{name}: {d.max():g} m from the base is {far:.3g} robot lengths away, where no tip reaches: "
+            f"positions are in metres; did you mean millimetres ({d.max() / 1e3:g} m)?"
+        )
+    if typed_in_mm and near < lo:
+        return (
+            f"{name}: {1e3 * near * length:g} mm from the base is {near:.2g} robot lengths away: "
+            f"did you type metres ({1e6 * near * length:g} mm)?"
+        )
+    return None
+
+
+def plausibility_note(name: str, value, label: str | None = None) -> str | None:
+    """A note for a concrete scalar whose magnitude lies far outside ``PLAUSIBLE[name]``, naming
+    the unit it was probably typed in (and the value as ``label``, default ``name``); None when
+    plausible, zero, traced or not in the table."""
+    if name not in PLAUSIBLE or not is_concrete(value) or np.size(value) != 1:
+        return None
+    v = abs(float(np.asarray(value, dtype=float).ravel()[0]))
+    unit, lo, hi, typical, others = PLAUSIBLE[name]
+    if v == 0.0 or lo <= v <= hi:
+        return None
+    fits = [(abs(math.log10(v * f / typical)), f, u) for f, u in others if lo <= v * f <= hi]
+    text = f"{label or name} = {v:g} {unit} is far outside the plausible range [{lo:g}, {hi:g}] {unit}"
+    if not fits:
+        return f"{text}: check its unit (SI)"
+    _, factor, other = min(fits)
+    return f"{text}: did you mean {v:g} {other} ({v * factor:g} {unit})?"
+
+
+def warn_user(message: str, category=UserWarning) -> None:
+    """``warnings.warn`` attributed to the first caller outside tdct_jax."""
+    level, frame = 2, sys._getframe(1)
+    while frame is not None and frame.f_globals.get("__name__", "").startswith("tdct_jax"):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(message, category, stacklevel=level)

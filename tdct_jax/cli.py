@@ -10,15 +10,15 @@ import math
 import os
 import re
 import sys
-import tempfile
 import warnings
 from pathlib import Path
 
 import jax
 import numpy as np
 
-from . import status
-from .checks import interval
+from . import __version__, status
+from .checks import UnitWarning, check_output, interval, target_note
+from .ik import MAX_STEPS as IK_MAX_STEPS
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .mechanics import compliance, compliance_ellipsoid
 from .options import MAX_ITER, STEPS, SolverOptions
@@ -131,29 +131,6 @@ def check_count(flag: str, value, n: int, what: str) -> None:
         raise ValueError(f"{flag} {','.join(f'{v:g}' for v in value)} has {len(value)} values: {what}")
 
 
-def check_output(flag: str, path, folder: bool = False) -> None:
-    """Before any computation: an output file's folder (or an output folder's nearest existing
-    ancestor, which it will be made in) exists and takes a new file; a ValueError names the flag
-    and the path otherwise."""
-    path = Path(path)
-    if not folder and path.is_dir():
-        raise ValueError(f"{flag} {path}: is a folder, expected a file name")
-    if folder and path.exists() and not path.is_dir():
-        raise ValueError(f"{flag} {path}: is a file, expected a folder")
-    where = path if folder and path.is_dir() else path.parent
-    if not folder and not where.is_dir():
-        raise ValueError(f"{flag} {path}: the folder {where} does not exist")
-    while folder and not where.exists():
-        where = where.parent
-    try:
-        with tempfile.TemporaryFile(dir=where):
-            pass
-        if not folder and path.exists():
-            path.open("a").close()
-    except OSError as e:
-        raise ValueError(f"{flag} {path}: cannot write a file in {where} ({e.strerror or e})") from None
-
-
 LISTS_HELP = "Lists are comma-separated; negative values may be typed as they are (--tip-force -0.15,0,0)."
 
 
@@ -198,6 +175,7 @@ def _parser() -> argparse.ArgumentParser:
         description="Statics of the TDCT soft robot (tdct_jax). " + LISTS_HELP,
         epilog="Exit codes: 0 done, 1 not converged (the reason on stderr), 2 bad input, 3 internal error.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     verbs = parser.add_subparsers(dest="verb", required=True)
     p = verbs.add_parser("solve", parents=[common], help="solve one static shape and print the tip pose", epilog=LISTS_HELP)
     p.add_argument("--plot", metavar="shape.png", help="save a side view and a 3D view of the shape")
@@ -218,7 +196,16 @@ def _parser() -> argparse.ArgumentParser:
     y = verbs.add_parser(
         "synth", parents=[described], help="write synthetic FBG-like shape files from the model", epilog=LISTS_HELP
     )
-    y.add_argument("--out", required=True, metavar="DIR", help="folder for the shape files (one CSV per experiment)")
+    y.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="folder for the shape files (one CSV per experiment); refused if it holds .csv files already "
+        "(tdct calibrate DIR would fit them too), unless --overwrite",
+    )
+    y.add_argument(
+        "--overwrite", action="store_true", help="delete the .csv files already in DIR (nothing else) before writing the new ones"
+    )
     which = y.add_mutually_exclusive_group(required=True)
     which.add_argument(
         "--preset", choices=["paper"], help="paper: Sec. III.B's protocol, tendon 1 at 2, 4, 6, 8, 10 N, no tube, no load"
@@ -244,13 +231,28 @@ def _parser() -> argparse.ArgumentParser:
         epilog=LISTS_HELP + " Exit codes: 0 reached, 1 unreachable or failed (the nearest pose is printed), 2 bad input.",
     )
     i.add_argument("--target-mm", type=_floats(3), required=True, metavar="X,Y,Z", help="target tip position in mm, world frame")
-    i.add_argument("--tip-angle-deg", type=_finite, help="also reach this in-plane tip angle in degrees (z-y plane, toward +y)")
+    i.add_argument(
+        "--axes",
+        default="xyz",
+        metavar="AXES",
+        help="the target components that count, e.g. y for a tip height or yz for the z-y plane (default xyz)",
+    )
+    i.add_argument(
+        "--tip-angle-deg",
+        type=_finite,
+        help="also reach this in-plane tip angle in degrees, in [-180, 180] (z-y plane, toward +y)",
+    )
     i.add_argument("--insertion-mm", type=_finite, help="fix the tube insertion at this depth in mm (default: free)")
     i.add_argument("--tendons", type=_floats(), metavar="1,3", help="the free tendons, numbered from 1 (default all)")
     i.add_argument("--max-tension-n", type=_finite, default=10.0, help="largest tension of a free tendon in N (default 10)")
     i.add_argument("--tip-mass-g", type=_finite, default=0.0, help="tip mass in grams held while reaching (default 0)")
     i.add_argument(
-        "--objective", choices=["stiffness", "tension"], help="among redundant solutions, the stiffest or least tension"
+        "--objective",
+        choices=["stiffness", "tension"],
+        help="among redundant solutions (more free inputs than target components), the stiffest or least tension",
+    )
+    i.add_argument(
+        "--max-steps", type=int, default=IK_MAX_STEPS, help=f"most IK steps, both phases together (default {IK_MAX_STEPS})"
     )
     i.add_argument(
         "--direction", type=_floats(3), metavar="DX,DY,DZ", help="world direction for --objective stiffness (default: along -y)"
@@ -272,9 +274,14 @@ def _parser() -> argparse.ArgumentParser:
         "--out",
         required=True,
         metavar="FILE.npz",
-        help="the results (tdct.gather reads them); work in progress in <stem>.partial/",
+        help="the results, an .npz (tdct.gather reads it); work in progress in <stem>.partial/",
     )
-    w.add_argument("--overwrite", action="store_true", help="discard a partial folder left by a different sweep")
+    w.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="discard a partial folder left by a different sweep, and recompute a finished FILE.npz "
+        "(without it, the same sweep finished already computes nothing)",
+    )
     w.add_argument("--quiet", action="store_true", help="no progress bar")
     w.add_argument(
         "--distributed",
@@ -289,6 +296,17 @@ OUTPUTS = {"plot": "--plot", "csv": "--csv"}
 checked by their verbs."""
 
 
+def _check_output(dest: str, flag: str, path) -> None:
+    """``check_output`` for a file flag; a figure's suffix must be a format matplotlib writes
+    (or none: PNG)."""
+    if dest != "plot":
+        return check_output(flag, path)
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    formats = ("", *(f".{s}" for s in sorted(FigureCanvasBase.get_supported_filetypes())))
+    check_output(flag, path, suffixes=formats, kind="an image format matplotlib writes")
+
+
 def _robot(args) -> Robot:
     robot = Robot.from_toml(args.robot) if args.robot else Robot()
     fields = dict(getattr(args, "set", []))
@@ -296,7 +314,7 @@ def _robot(args) -> Robot:
     if unknown:
         raise ValueError(f"--set: unknown Robot field(s) {unknown}; allowed: {list(SCALAR_FIELDS)}")
     try:
-        return dataclasses.replace(robot, **fields)
+        return dataclasses.replace(robot, **fields) if fields else robot
     except ValueError as e:
         raise ValueError(f"--set: {e}") from None
 
@@ -420,6 +438,12 @@ def _synth_command(args) -> int:
     from .data import write_experiment
 
     check_output("--out", args.out, folder=True)
+    earlier = sorted(Path(args.out).glob("*.csv")) if Path(args.out).is_dir() else []
+    if earlier and not args.overwrite:
+        raise ValueError(
+            f"--out {args.out}: the folder holds {len(earlier)} .csv file(s) already ({earlier[0].name}, ...), which "
+            "tdct calibrate would fit together with the new ones: give an empty or new folder, or --overwrite to delete them"
+        )
     robot = _robot(args)
     solver = _solver(args)
     check_flag("--insertion-mm", args.insertion_mm, 0.0, 1e3 * float(robot.length), " mm")
@@ -442,6 +466,8 @@ def _synth_command(args) -> int:
         gravity=_gravity(args),
         solver=solver,
     )
+    for f in earlier:  # only once the new shapes are computed
+        f.unlink()
     for i, e in enumerate(experiments, start=1):
         print(write_experiment(Path(args.out) / f"{i:02d}_{e.name}.csv", e))
     return 0
@@ -466,7 +492,9 @@ def _calibrate_command(args) -> int:
         fitted = ", ".join(f"{p} = {fit.values[p]:.4g} {unit_of(p).replace('_per_', '/')}" for p in params)
         plot_calibration(fit.solutions, experiments, args.plot, title=f"calibrated: {fitted}")
     if not fit.converged:
-        raise ConvergenceError(f"calibration did not converge: {fit.message}", fit.result)
+        advice = f"hit --max-steps {args.max_steps}; raise it, or start nearer the optimum (--set)"
+        message = advice if fit.result == status.OUTER_LIMIT else fit.message
+        raise ConvergenceError(f"calibration did not converge: {message}", fit.result)
     return 0
 
 
@@ -493,8 +521,28 @@ def _ik_command(args) -> int:
     if args.direction is not None and args.objective != "stiffness":
         raise ValueError("--direction goes with --objective stiffness")
     direction = args.direction or (0.0, -1.0, 0.0)
+    if args.tip_angle_deg is not None:
+        check_flag("--tip-angle-deg", args.tip_angle_deg, -180.0, 180.0, " deg")
+    check_flag("--max-steps", args.max_steps, 1)
+    if not args.axes or not set(args.axes) <= set(ik.AXES) or len(set(args.axes)) != len(args.axes):
+        raise ValueError(f"--axes {args.axes}: the target components that count, each once, from x, y, z (e.g. y, yz)")
     tip_angle = None if args.tip_angle_deg is None else np.radians(args.tip_angle_deg)
-    target = ik.Target(np.asarray(args.target_mm) * 1e-3, tip_angle=tip_angle)
+    target = ik.Target(np.asarray(args.target_mm) * 1e-3, tip_angle=tip_angle, axes=args.axes)
+    if args.axes == "xyz":
+        note = target_note(
+            f"--target-mm {','.join(f'{x:g}' for x in args.target_mm)}", target.position, float(robot.length), True
+        )
+        if note:
+            warnings.warn(note, UnitWarning, stacklevel=1)
+    free = (robot.n_tendons if tendons is None else len(tendons)) + (args.insertion_mm is None)
+    if args.objective is not None and free <= target.size:
+        fixed = f"; --insertion-mm {args.insertion_mm:g} fixes the tube" if args.insertion_mm is not None else " and the tube"
+        raise ValueError(
+            f"--objective {args.objective}: nothing to choose: {free} free input(s) (tendons "
+            f"{','.join(map(str, tendons or range(1, robot.n_tendons + 1)))}{fixed}) for {target.size} target "
+            f"component(s) ({ik.describe_task(target)}); an objective needs more free inputs than target components: "
+            "give more --tendons, leave out --insertion-mm, or fewer --axes"
+        )
     result = ik.inverse_kinematics(
         robot,
         target,
@@ -506,6 +554,7 @@ def _ik_command(args) -> int:
         direction=direction if args.objective == "stiffness" else None,
         gravity=_gravity(args),
         solver=solver,
+        max_steps=args.max_steps,
         throw=False,
     )
     code = int(result.result)
@@ -550,16 +599,17 @@ def _ik_command(args) -> int:
         title = f"IK to ({', '.join(f'{x:g}' for x in args.target_mm)}) mm: {out['status']}"
         plot_shape(result.solution, float(result.actuation.insertion), args.plot, title=title, target=target.position)
     if code not in (status.SUCCESS,):
-        print(f"tdct: error: {status.message(code, what='the inverse kinematics', max_steps=ik.MAX_STEPS)}", file=sys.stderr)
+        advice = status.message(code, cli=True, what="the inverse kinematics", max_steps=args.max_steps)
+        print(f"tdct: error: {advice}", file=sys.stderr)
         return 1
     return 0
 
 
 def _sweep_command(args) -> int:
     from .spec import read_spec
-    from .sweep import sweep
+    from .sweep import OUT_KIND, OUT_SUFFIXES, sweep
 
-    check_output("--out", args.out)
+    check_output("--out", args.out, suffixes=OUT_SUFFIXES, kind=OUT_KIND)
     spec = read_spec(args.spec)
     if args.distributed or int(os.environ.get(SLURM_TASKS, "1")) > 1:
         jax.distributed.initialize()
@@ -594,15 +644,16 @@ def main(argv: list[str] | None = None) -> int:
     try:
         for dest, flag in OUTPUTS.items():
             if getattr(args, dest, None):
-                check_output(flag, getattr(args, dest))
+                _check_output(dest, flag, getattr(args, dest))
         with _notes(), jax.default_device(jax.local_devices(backend="cpu")[0]) if on_cpu else contextlib.nullcontext():
             return COMMANDS[args.verb](args)
     except (ValueError, TypeError, OSError) as e:
         return _fail(e, 2)
     except ConvergenceError as e:
-        return _fail(e, 1)
+        return _fail(e.cli_message, 1)
     except KeyboardInterrupt:
-        print("tdct: interrupted", file=sys.stderr)
+        again = "; the finished chunks are kept: rerunning the same command resumes from them" if args.verb == "sweep" else ""
+        print(f"tdct: interrupted{again}", file=sys.stderr)
         return 130
     except Exception as e:  # no traceback reaches a user: say what happened and how to learn more
         if os.environ.get("TDCT_DEBUG"):
@@ -619,14 +670,18 @@ def _fail(error, code: int) -> int:
 
 @contextlib.contextmanager
 def _notes():
-    """Prints CalibrationWarnings as one-line notes on stderr (inputs outside the calibrated range)."""
+    """Prints CalibrationWarnings (inputs outside the calibrated range) and UnitWarnings (values
+    far outside any robot's, as if typed in another unit) as one-line notes on stderr."""
     with warnings.catch_warnings():
         warnings.simplefilter("always", CalibrationWarning)
-        show = warnings.showwarning
+        warnings.simplefilter("always", UnitWarning)
+        show, shown = warnings.showwarning, set()
 
         def note(message, category, *rest, **kw):
-            if issubclass(category, CalibrationWarning):
-                print(f"tdct: note: {message}", file=sys.stderr)
+            if issubclass(category, (CalibrationWarning, UnitWarning)):
+                if str(message) not in shown:  # once each, though the robot is rebuilt along the way
+                    print(f"tdct: note: {message}", file=sys.stderr)
+                    shown.add(str(message))
             else:
                 show(message, category, *rest, **kw)
 

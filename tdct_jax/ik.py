@@ -37,7 +37,7 @@ from jax import lax
 
 from . import status
 from .batch import Kernel, default_chunk_size, lanes_per_call, run_batched
-from .checks import as_array, check_choice, check_integer, check_range, is_concrete
+from .checks import UnitWarning, as_array, check_choice, check_integer, check_range, is_concrete, target_note, warn_user
 from .linalg import solve_spd
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
@@ -62,8 +62,8 @@ class Target:
     Attributes:
         position: tip position [m], (3,); a leading batch axis (n, 3) holds n targets.
         direction: unit tip tangent to reach, (3,) (normalised here), or None.
-        tip_angle: in-plane tip angle theta_tip [rad] (z-y plane, from +z toward +y), or None;
-            at most one of direction and tip_angle. Batched like the position.
+        tip_angle: in-plane tip angle theta_tip [rad] (z-y plane, from +z toward +y) in
+            [-pi, pi], or None; at most one of direction and tip_angle. Batched like the position.
         position_weight: weight of the position error (per robot length), > 0.
         orientation_weight: weight of the orientation error (per radian), >= 0.
         axes: the position components that count (static), e.g. "yz" for a target in the z-y
@@ -95,6 +95,7 @@ class Target:
                     raise ValueError("direction = [0, 0, 0]: a tip direction must be a nonzero vector")
                 direction = direction / norm
         tip = as_array("tip_angle", self.tip_angle, unit=" rad") if self.tip_angle is not None else None
+        check_range("tip_angle", tip, -np.pi, np.pi, unit=" rad") if tip is not None else None
         if direction is not None and tip is not None:
             raise ValueError("give at most one of direction (a unit tangent) and tip_angle (in-plane), not both")
         weights = {}
@@ -782,8 +783,8 @@ def inverse_kinematics(
         target: a Target (or a tip position [m], (3,)); a leading batch axis on its fields solves
             many targets at once (``jax.vmap``).
         load: tip force [N] and moment [N m], world frame, held while reaching; none by default.
-        tendons: the free tendons, numbered from 1 like the paper (default all); the others keep
-            the tension ``guess`` gives them (default 0).
+        tendons: the free tendons, numbered from 1 like the paper: a number or a sequence
+            (default all); the others keep the tension ``guess`` gives them (default 0).
         insertion: None (free) or a fixed insertion depth [m].
         bounds: Bounds on the free tensions [N] and the insertion [m]; never violated.
         objective: among redundant solutions (free inputs beyond the task's dimensions), the one
@@ -791,7 +792,8 @@ def inverse_kinematics(
             direction the largest eigenvalue of its symmetric part), "tension" (total squared
             tension: no needless co-contraction), "insertion" (squared distance from
             ``preferred_insertion`` [m], default L / 2), or a callable f(Solution, Actuation) ->
-            scalar, differentiable. None: the first solution found.
+            scalar, differentiable. None: the first solution found. With no more free inputs
+            than task coordinates there is nothing to choose: a ValueError says so.
         direction: world direction for the "stiffness" objective, (3,), nonzero.
         preferred_insertion: for the "insertion" objective [m], in [0, L].
         guess: an Actuation to start from (free inputs) and to take the fixed tensions from.
@@ -866,13 +868,20 @@ def track(robot: Robot, targets: Target, **options) -> IKResult:
     each started from the last solution, as one compiled ``lax.scan``: the real-time control case.
 
     Args:
-        robot, targets: the robot and the targets in order.
+        robot, targets: the robot and the targets in order (at least one; a Target, or tip
+            positions [m] of shape (n, 3)).
         **options: as for ``inverse_kinematics`` (``guess`` starts the first step).
 
     Returns:
         IKResult with a leading axis over the targets.
     """
     throw = options.pop("throw", True)
+    targets = targets if isinstance(targets, Target) else Target(targets)
+    if is_concrete(targets.position) and (np.ndim(targets.position) != 2 or len(targets.position) == 0):
+        raise ValueError(
+            f"targets: track needs at least one target, a Target whose position has shape (n, 3) with n >= 1, "
+            f"got shape {np.shape(targets.position)}"
+        )
     leaves, tree = jax.tree.flatten(targets)
     own = tuple(i for i, leaf in enumerate(leaves) if jnp.ndim(leaf) >= 1)  # the rest (weights) are shared
     first = jax.tree.unflatten(tree, [leaf[0] if i in own else leaf for i, leaf in enumerate(leaves)])
@@ -895,6 +904,12 @@ def _track(prob, leaves, v0, wrench0, plan, tol, max_steps, tree, own):
         return (jnp.where(ok, v_new, v), jnp.where(ok, wrench_new, wrench)), result
 
     return lax.scan(step, (v0, wrench0), [leaves[i] for i in own])[1]
+
+
+def describe_task(target: Target) -> str:
+    """The task coordinates of a target in words, e.g. "x, y, z and the tip angle"."""
+    extra = {None: "", "direction": " and the tip direction (2)", "tip_angle": " and the tip angle"}[target.orientation]
+    return ", ".join(target.axes) + extra
 
 
 def _arguments(*args, **kwargs) -> dict:
@@ -935,10 +950,18 @@ def _problem(
     base = Actuation(np.zeros(robot.n_tendons)) if guess is None else guess
     check_inputs(robot, base, load, solver, batch=jnp.ndim(target.position) == 2)
     n_t = robot.n_tendons
-    tendons = tuple(range(1, n_t + 1)) if tendons is None else tuple(tendons)
-    for t in tendons:
+    typed = tendons
+    if tendons is None:
+        tendons = tuple(range(1, n_t + 1))
+    elif isinstance(tendons, (int, np.integer)):
+        tendons = (tendons,)  # one tendon
+    elif isinstance(tendons, (tuple, list, np.ndarray)):
+        tendons = tuple(tendons)
+    for t in tendons if isinstance(tendons, tuple) else (None,):
         if isinstance(t, bool) or not isinstance(t, (int, np.integer)) or not 1 <= t <= n_t:
-            raise ValueError(f"tendons = {tendons!r}: each must be a tendon number in [1, {n_t}] (tendon 1 at body +y)")
+            raise ValueError(
+                f"tendons = {typed!r}: a tendon number or a sequence of them, each in [1, {n_t}] (tendon 1 at body +y)"
+            )
     if len(set(tendons)) != len(tendons):
         raise ValueError(f"tendons = {tendons!r} names a tendon twice")
     L = float(robot.length) if is_concrete(robot.length) else robot.length
@@ -967,6 +990,19 @@ def _problem(
     tol = as_array("tol", tol, ())
     check_range("tol", tol, 0.0, lo_open=True)
     check_integer("max_steps", max_steps)
+    if is_concrete(target.position) and is_concrete(L):
+        note = target_note("target position", np.asarray(target.position)[..., [AXES.index(a) for a in target.axes]], float(L))
+        if note:
+            warn_user(note, UnitWarning)
+    free = len(tendons) + (insertion is None)
+    if objective is not None and free <= target.size:
+        raise ValueError(
+            f"objective = {getattr(objective, '__name__', objective)!r}: nothing to choose: {free} free input(s) "
+            f"(tendons {tendons}{'; the insertion fixed' if insertion is not None else ' and the insertion'}) for {target.size} task "
+            f"coordinate(s) ({describe_task(target)}); an objective picks among solutions only with more free inputs "
+            "than task coordinates: free more tendons (tendons=), leave the insertion free, or give fewer target axes "
+            "(Target(..., axes=...))"
+        )
     scale = jnp.maximum(jnp.asarray(bounds.tension[1]), 1.0)
     lo = [jnp.full(len(tendons), bounds.tension[0]) / scale] + (
         [jnp.reshape(ins_bounds[0] / L, (1,))] if insertion is None else []

@@ -6,7 +6,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from .checks import as_array, check_range, is_concrete
+from .checks import UnitWarning, as_array, check_range, is_concrete, plausibility_note, warn_user
 from .tree import pytree, set_fields
 
 STANDARD_GRAVITY = (0.0, -9.81, 0.0)
@@ -84,4 +84,9 @@ def gravity_vector(gravity):
     if gravity is None:
         return np.zeros(3)
     g = as_array("gravity", gravity, (3,))
-    return g if is_concrete(g) else jnp.asarray(g, dtype=float)
+    if not is_concrete(g):
+        return jnp.asarray(g, dtype=float)
+    note = plausibility_note("gravity", np.linalg.norm(g), "|gravity|")
+    if note:
+        warn_user(note, UnitWarning)
+    return g

@@ -18,7 +18,7 @@ from jax import lax
 
 from . import status
 from .batch import Kernel, batch_options
-from .checks import check_integer
+from .checks import check_integer, is_concrete
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
 from .results import CapacityResult, OptimumResult
@@ -35,9 +35,10 @@ MAX_STEPS = 30
 
 
 class Capacity(NamedTuple):
-    """Largest tip mass [kg] that the tip lifts to the target height; ``reachable`` is False (and
-    mass 0) when even the unloaded tip stays below it. ``iterations``: Newton steps on the mass;
-    ``result``: a ``tdct_jax.status`` code (SUCCESS, OUTER_LIMIT, or the failed solve's code)."""
+    """Largest tip mass [kg] that the tip lifts to the target height; ``reachable`` is False (mass
+    0, result UNREACHABLE) when even the unloaded tip stays below it. ``iterations``: Newton steps
+    on the mass; ``result``: a ``tdct_jax.status`` code (SUCCESS, UNREACHABLE, OUTER_LIMIT, or the
+    failed solve's code)."""
 
     mass: jax.Array
     reachable: jax.Array
@@ -93,7 +94,8 @@ def capacity(
         max_steps: most Newton steps on the mass.
         gravity: world gravity [m/s^2]; the tip mass weighs m * gravity.
         solver: SolverOptions for every solve.
-        throw: raise ConvergenceError unless the result is SUCCESS (default, as everywhere).
+        throw: raise ConvergenceError unless the result is SUCCESS (default, as everywhere),
+            also where the tip cannot reach ``height`` at all (UNREACHABLE).
 
     Returns:
         Capacity (mass [kg], reachable, iterations, result).
@@ -131,14 +133,21 @@ def capacity(
         init = (m0, jnp.inf, -1.0, m0, jnp.inf, jnp.full(6, jnp.nan), 0, jnp.inf, True, status.SUCCESS)
         m, y, _, _, _, _, it, y0, ok0, code0 = lax.while_loop(not_done, body, init)
         reachable = ok0 & (y0 > 0)
-        result = jnp.where(~ok0, code0, jnp.where(~reachable | (jnp.abs(y) <= height_tol), status.SUCCESS, status.OUTER_LIMIT))
+        met = jnp.where(jnp.abs(y) <= height_tol, status.SUCCESS, status.OUTER_LIMIT)
+        result = jnp.where(~ok0, code0, jnp.where(reachable, met, status.UNREACHABLE))
         return m, (reachable.astype(float), result.astype(float), (it - 1).astype(float))
 
     m, (reachable, result, it) = lax.custom_root(f, jnp.zeros(()), search, lambda g, y: y / g(jnp.ones_like(y)), has_aux=True)
     reachable = reachable > 0.5
     cap = Capacity(jnp.where(reachable, m, 0.0), reachable, it.astype(jnp.int32), jnp.round(result).astype(jnp.int32))
-    status.check(cap.result, throw=throw, what="the load capacity", max_steps=max_steps)
+    status.check(cap.result, throw=throw, what="the load capacity", max_steps=max_steps, unreachable=_unreachable(height))
     return cap
+
+
+def _unreachable(height) -> str:
+    """What UNREACHABLE means for a load capacity at ``height`` [m]."""
+    where = f"the height y = {float(height):g} m" if is_concrete(height) else "the target height"
+    return f"even with no tip mass the tip stays below {where}, so it holds no mass there (mass 0, reachable False)"
 
 
 class Optimum(NamedTuple):
@@ -239,8 +248,9 @@ def load_capacity(robot=None, act=None, *, grid=None, batch=None, throw=True, **
 
     Args:
         robot, act, grid, batch: as for ``tdct.sweep`` (the tip mass is what is sought).
-        throw: raise ConvergenceError after the whole grid, naming the first failed point
-            (default, as everywhere); with False failures stay in ``result`` per point.
+        throw: raise ConvergenceError after the whole grid, naming the first failed or
+            unreachable point (default, as everywhere); with False they stay in ``result`` per
+            point (UNREACHABLE where the tip cannot reach the height: mass 0).
         **options: ``capacity``'s keyword arguments (height, height_tol, max_steps, gravity,
             solver) and the batching options of ``tdct.sweep`` (chunk_size, progress, devices).
 
@@ -252,7 +262,11 @@ def load_capacity(robot=None, act=None, *, grid=None, batch=None, throw=True, **
     run = batch_options(**batching)
     start = perf_counter()
     out = unflatten(run(Kernel(_capacity_point, own), base, points, desc="load capacity"), shape)
-    status.check(out["result"], throw=throw, what="the load capacity", max_steps=dict(own)["max_steps"])
+    own_options = dict(own)
+    unreachable = _unreachable(own_options.get("height", 0.0))
+    status.check(
+        out["result"], throw=throw, what="the load capacity", max_steps=own_options["max_steps"], unreachable=unreachable
+    )
     return CapacityResult(shape=shape, axes=axes, inputs=unflatten(points, shape), seconds=perf_counter() - start, **out)
 
 

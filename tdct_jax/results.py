@@ -7,6 +7,7 @@ import csv
 import dataclasses
 import math
 import re
+import zipfile
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -136,8 +137,8 @@ class SweepResult(GridResult):
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class CapacityResult(GridResult):
-    """Outputs of ``tdct.load_capacity``: mass [kg] (0 where unreachable), reachable, iterations
-    (safeguarded Newton steps on the mass), per point."""
+    """Outputs of ``tdct.load_capacity``: mass [kg] (0 where unreachable, with result
+    UNREACHABLE), reachable, iterations (safeguarded Newton steps on the mass), per point."""
 
     mass: np.ndarray
     reachable: np.ndarray
@@ -202,6 +203,22 @@ def sweep_result(arrays: Mapping) -> SweepResult:
     )
 
 
+def _read_npz(path: Path) -> dict:
+    """The arrays of a sweep's .npz file; a ValueError says so when it is not one."""
+    what = "not a tdct sweep result (an .npz, as sweep(out=) or SweepResult.save_npz write it)"
+    if not zipfile.is_zipfile(path):
+        raise ValueError(f"{path}: {what}: it is not an .npz (zip) archive")
+    try:
+        with np.load(path) as data:
+            arrays = dict(data)
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        raise ValueError(f"{path}: {what}: numpy cannot read its arrays ({e})") from None
+    missing = sorted({"shape", "result", "tip_position"} - set(arrays))
+    if missing:
+        raise ValueError(f"{path}: {what}: it lacks the arrays {missing}")
+    return arrays
+
+
 def gather(path) -> SweepResult:
     """Reads what ``sweep(..., out=path)`` wrote: the file itself or, after a sweep over N
     processes, its parts ``<stem>.partK-of-N.npz`` joined in order.
@@ -211,13 +228,12 @@ def gather(path) -> SweepResult:
 
     Raises:
         ValueError: when the file is not there (naming every missing or unfinished part, and
-            how far each partial folder got), or its parts come from different sweeps or from
-            sweeps over different process counts.
+            how far each partial folder got), is not a sweep's .npz, or its parts come from
+            different sweeps or from sweeps over different process counts.
     """
     path = Path(path)
     if path.exists():
-        with np.load(path) as data:
-            arrays = dict(data)
+        arrays = _read_npz(path)
         if "points" in arrays:
             raise ValueError(
                 f"{path} holds one part of a sweep (points {arrays['points'].tolist()}); gather the path given as out="
@@ -252,10 +268,7 @@ def gather(path) -> SweepResult:
             f"{path}: {len(unfinished)} of {n_proc} parts are missing or unfinished: {', '.join(unfinished)}; "
             f"rerun the same sweep over {n_proc} processes to finish them"
         )
-    parts = []
-    for k in range(n_proc):
-        with np.load(found[k, n_proc]) as data:
-            parts.append(dict(data))
+    parts = [_read_npz(found[k, n_proc]) for k in range(n_proc)]
     shape, stop = tuple(parts[0]["shape"]), 0
     for k, part in enumerate(parts):
         start, end = part.pop("points").tolist()

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import sys
 import tomllib
 import warnings
 from pathlib import Path
@@ -11,7 +10,7 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from .checks import as_array, check_range, fmt, interval, is_concrete
+from .checks import UnitWarning, as_array, check_range, fmt, interval, is_concrete, plausibility_note, warn_user
 from .tree import pytree, set_fields, static
 
 SCALAR_FIELDS = (
@@ -100,6 +99,10 @@ class Robot:
                 raise ValueError("tendon_angles must list at least one tendon, got an empty list")
         set_fields(self, tendon_angles=angles)
         self._check()
+        for name in SCALAR_FIELDS:
+            note = plausibility_note(name, getattr(self, name))
+            if note:
+                warn_user(note, UnitWarning)
 
     def _check(self):
         for name in ("length", "outer_diameter", "E_silicone", "E_tube", "tube_outer_diameter"):
@@ -172,11 +175,8 @@ class Robot:
 
     def warn_outside_calibration(self, tensions, tip_force) -> None:
         """``calibration_notes`` as CalibrationWarnings, attributed to the caller's code."""
-        level, frame = 2, sys._getframe(1)
-        while frame is not None and frame.f_globals.get("__name__", "").startswith("tdct_jax"):
-            frame, level = frame.f_back, level + 1
         for note in self.calibration_notes(tensions, tip_force):
-            warnings.warn(note, CalibrationWarning, stacklevel=level)
+            warn_user(note, CalibrationWarning)
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Robot:
@@ -195,10 +195,18 @@ class Robot:
         unknown = sorted(set(data) - known)
         if unknown:
             raise ValueError(f"robot file {path}: unknown field(s) {unknown}; allowed: {sorted(known)}")
-        try:
-            return cls(**data)
-        except ValueError as e:
-            raise ValueError(f"robot file {path}: {e}") from e
+        with warnings.catch_warnings(record=True) as notes:
+            warnings.simplefilter("always", UnitWarning)
+            try:
+                robot = cls(**data)
+            except ValueError as e:
+                raise ValueError(f"robot file {path}: {e}") from e
+        for note in notes:
+            if issubclass(note.category, UnitWarning):
+                warn_user(f"robot file {path}: {note.message}", UnitWarning)
+            else:
+                warnings.warn_explicit(note.message, note.category, note.filename, note.lineno)
+        return robot
 
     @property
     def n_tendons(self) -> int:

@@ -2,7 +2,7 @@
 
 A spec, SI units throughout (every key but one table of points is optional)::
 
-    robot = "robot.toml"      # a file of Robot fields beside the spec, or a [robot] table; default Table II
+    # robot = "robot.toml"    # a file of Robot fields beside the spec (it must exist), or a [robot] table; default Table II
     gravity = true            # true (standard, -y), false, or [gx, gy, gz] in m/s^2
     chunk_size = 64           # configurations per compiled call (default: the platform's)
     shapes = false            # also keep every shape / the 3x3 tip compliance
@@ -33,6 +33,7 @@ from .checks import check_integer
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .options import SolverOptions
 from .robot import Robot
+from .sweep import check_points
 
 OPTIONS = ("chunk_size", "shapes", "compliance", "warm_start", "gravity")
 TABLES = ("robot", "base", "solver", "grid", "batch")
@@ -51,7 +52,8 @@ def read_spec(path) -> dict:
 
     Raises:
         ValueError: the file cannot be read, or a key is unknown or has a bad value (the message
-            names the file, the key, the value and what is allowed).
+            names the file, the table, the key, the value and what is allowed), or the points
+            would not fit in host memory.
     """
     path = Path(path)
     try:
@@ -116,11 +118,14 @@ def _arguments(data: dict, folder: Path) -> dict:
         raise ValueError(f"[{kind}] is empty: give at least one input name = values")
     defaults = dict(tensions=act.tensions, force=load.force, moment=load.moment)
     args[kind] = {name: _values(f"{kind}.{name}", v, defaults.get(name)) for name, v in columns.items()}
+    _built(kind, lambda: check_points(robot, args.get("grid"), args.get("batch")))  # values, and host memory
     for name in ("shapes", "compliance", "warm_start"):
         if name in data:
             if not isinstance(data[name], bool):
                 raise ValueError(f"{name} = {data[name]!r} must be true or false")
             args[name] = data[name]
+    if args.get("warm_start") and kind != "grid":
+        raise ValueError("warm_start = true needs a [grid] table: the solves run in order along its last axis")
     if "chunk_size" in data:
         args["chunk_size"] = check_integer("chunk_size", data["chunk_size"])
     args["gravity"] = _gravity(data.get("gravity", True))

@@ -21,7 +21,8 @@ OUTER_LIMIT = 4
 ``max_steps`` without meeting its own tolerance."""
 UNREACHABLE = 5
 """Inverse kinematics: no input within the bounds puts the tip on the target; the nearest pose
-found is the answer (not a failure: ``throw`` does not raise for it)."""
+found is the answer (not a failure: ``throw`` does not raise for it). Load capacity: even the
+unloaded tip stays below the height (mass 0; ``throw`` raises, there is no capacity)."""
 
 NAMES = {
     SUCCESS: "converged",
@@ -36,42 +37,60 @@ _ADVICE = {
     NEWTON_LIMIT: (
         "Newton used its limit of max_iter = {max_iter} steps per load stage without bringing the scaled tip residual "
         "({residual_norm:.3g}) below tol = {tol:g} ({iterations} steps in all; the loads were ramped in up to {stages} "
-        "stages). Raise max_iter (SolverOptions(max_iter=...), or --max-iter), or start from a nearby solution (guess=)."
+        "stages). {raise_max_iter}."
     ),
     CONTINUATION_EXHAUSTED: (
         "Newton stalled (its damping grew without lowering the scaled tip residual {residual_norm:.3g} below tol = {tol:g}) "
         "even with the loads ramped in {stages} stages ({iterations} steps in all). The configuration is probably beyond "
-        "what the model can reach (a looped or buckled shape), or tol is below what float64 round-off allows: check the "
-        "inputs and tol, or approach the configuration from a nearby converged solution (guess=)."
+        "what the model can reach (a looped or buckled shape), or tol is below what float64 round-off allows: "
+        "{check_inputs}."
     ),
     NONFINITE: (
         "the shooting residual is not finite (NaN or inf) after {iterations} Newton steps: the inputs are probably extreme "
         "(check the robot fields, tensions and loads)."
     ),
-    OUTER_LIMIT: (
-        "{what} used its max_steps = {max_steps} without meeting its tolerance; raise max_steps or start nearer the answer."
-    ),
-    UNREACHABLE: "no inputs within the bounds put the tip on the target; the nearest pose found is returned.",
+    OUTER_LIMIT: "{what} used its max_steps = {max_steps} without meeting its tolerance; {raise_max_steps}.",
+    UNREACHABLE: "{unreachable}",
 }
+HINTS = {
+    False: dict(
+        raise_max_iter="Raise max_iter (SolverOptions(max_iter=...)), or start from a nearby solution (guess=)",
+        check_inputs="check the inputs and tol, or approach the configuration from a nearby converged solution (guess=)",
+        raise_max_steps="raise max_steps or start nearer the answer",
+        keep_failures="throw=False keeps them as result codes",
+    ),
+    True: dict(
+        raise_max_iter="Raise --max-iter",
+        check_inputs="check the inputs (tensions, tip load, robot fields) and the spec's [solver] tol",
+        raise_max_steps="raise --max-steps or start nearer the answer",
+        keep_failures="their result codes are kept",
+    ),
+}
+"""What to do, in the words of the Python API (False) and of the ``tdct`` command line (True)."""
+DEFAULTS = dict(unreachable="no inputs within the bounds put the tip on the target; the nearest pose found is returned")
+"""Context a caller may override (e.g. what UNREACHABLE means for a load capacity)."""
 
 
 class ConvergenceError(RuntimeError):
-    """An iteration did not converge (raised with ``throw=True``); ``result`` is its code."""
+    """An iteration did not converge (raised with ``throw=True``); ``result`` is its code;
+    ``cli_message`` says the same with the command line's flags for the Python arguments."""
 
-    def __init__(self, message: str, result: int):
+    def __init__(self, message: str, result: int, cli_message: str | None = None):
         super().__init__(message)
         self.result = result
+        self.cli_message = message if cli_message is None else cli_message
 
 
-def message(result: int, **context) -> str:
-    """What went wrong and what to do, for one result code; ``context`` fills in the numbers."""
+def message(result: int, *, cli: bool = False, **context) -> str:
+    """What went wrong and what to do, for one result code; ``context`` fills in the numbers;
+    ``cli``: the advice names ``tdct``'s flags instead of Python arguments."""
     result = int(result)
     if result == SUCCESS:
         return NAMES[SUCCESS]
     template = _ADVICE.get(result)
     if template is None:
         return f"unknown result code {result}"
-    return f"{NAMES[result]}: " + template.format_map(_Context(context))
+    return f"{NAMES[result]}: " + template.format_map(_Context(DEFAULTS | HINTS[cli] | context))
 
 
 class _Context(dict):
@@ -119,4 +138,12 @@ def _raise_first(result: np.ndarray, what: str, context: dict) -> None:
     if result.ndim:
         index = np.unravel_index(i, result.shape)
         where = f" at point {index if len(index) > 1 else index[0]} ({failed.size} of {result.size} failed)"
-    raise ConvergenceError(f"{what} did not converge{where}: {message(code, what=what, **values)}", code)
+
+    def text(cli: bool) -> str:
+        try:  # ``what`` may hold a hint, e.g. {keep_failures}
+            said = what.format_map(_Context(HINTS[cli]))
+        except (ValueError, IndexError):
+            said = what
+        return f"{said} did not converge{where}: {message(code, cli=cli, what=said, **values)}"
+
+    raise ConvergenceError(text(False), code, text(True))

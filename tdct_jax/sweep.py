@@ -13,6 +13,8 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import math
+import os
+import sys
 from collections.abc import Collection, Iterator, Mapping
 from pathlib import Path
 from time import perf_counter
@@ -25,8 +27,8 @@ from jax import lax
 
 from . import __version__, status
 from .batch import Kernel, chunk_lanes, iter_batched, joined, mesh_for
-from .checkpoint import Partial, digest
-from .checks import as_array, check_range
+from .checkpoint import Partial, complete, digest
+from .checks import as_array, check_output, check_range
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .mechanics import compliance_and_solution
 from .options import DEFAULT_SOLVER, SolverOptions
@@ -49,6 +51,8 @@ def _check_values(name: str, values, robot: Robot) -> np.ndarray:
     """Validates one column (leading axis = points); errors name the field, the point and the range."""
     shape = _point_shape(name, robot)
     v = np.asarray(values, dtype=np.float64) if np.ndim(values) else np.reshape(values, (1,)).astype(np.float64)
+    if len(v) == 0:
+        raise ValueError(f"{name}: no values (an empty list); give at least one point")
     if v.ndim == 0 or v.shape[1:] != shape:
         raise ValueError(f"{name}: each point must have shape {shape}, got values of shape {np.shape(values)}")
     v = as_array(name, v, v.shape)
@@ -77,10 +81,11 @@ class Points(NamedTuple):
     axes: dict | None  # the grid's axes, None for a batch
 
 
-def prepare(robot, act, load, grid, batch, *, gravity, solver, single=False) -> Points:
+def prepare(robot, act, load, grid, batch, *, gravity, solver, single=False, outputs: int = 0) -> Points:
     """Defaults for the base configuration, its checks, and the points of ``grid`` or ``batch``.
 
     With ``single`` and neither grid nor batch, the base configuration is the one point (shape ()).
+    ``outputs``: bytes per point the caller keeps in memory (for ``check_points``).
     """
     robot = Robot() if robot is None else robot
     act = Actuation(np.zeros(robot.n_tendons)) if act is None else act
@@ -90,7 +95,7 @@ def prepare(robot, act, load, grid, batch, *, gravity, solver, single=False) -> 
     if single and grid is None and batch is None:
         points = Points(base, {"insertion": np.asarray(act.insertion).reshape(1)}, (), None)
     else:
-        points = Points(base, *_columns(robot, grid, batch))
+        points = Points(base, *_columns(robot, grid, batch, outputs))
     p, g = points.points, base[3]
     force = np.asarray(p.get("force", load.force)) + np.multiply.outer(p.get("tip_mass", 0.0), np.asarray(g))
     robot.warn_outside_calibration(p.get("tensions", act.tensions), force)
@@ -102,8 +107,11 @@ def unflatten(arrays: dict, shape: tuple, lead: int = 1) -> dict:
     return {k: v.reshape(shape + v.shape[lead:]) for k, v in arrays.items()}
 
 
-def _columns(robot, grid, batch):
-    """(columns with a leading point axis, sweep shape, grid axes or None)."""
+def check_points(robot, grid, batch, outputs: int = 0) -> tuple[dict, tuple]:
+    """Checks the values of ``grid`` or ``batch`` (each axis or column, the batch's lengths) and
+    that the points fit in host memory, before any is made: returns (the checked axes or
+    columns, the sweep's shape). ``outputs``: bytes per point the caller keeps in memory besides
+    the inputs."""
     if (grid is None) == (batch is None):
         raise ValueError("give exactly one of grid= (a product of axes) and batch= (columns zipped point by point)")
     named = grid if grid is not None else batch
@@ -114,8 +122,49 @@ def _columns(robot, grid, batch):
         lengths = {k: len(v) for k, v in values.items()}
         if len(set(lengths.values())) != 1:
             raise ValueError(f"batch columns must have the same number of points, got {lengths}")
-        return values, (next(iter(lengths.values())),), None
-    shape = tuple(len(v) for v in values.values())
+        shape = (next(iter(lengths.values())),)
+    else:
+        shape = tuple(len(v) for v in values.values())
+    # each input at every point, float64, held twice (the points and the fingerprint's copy); a
+    # grid's index arrays (int64, one per axis)
+    per_point = 16 * sum(v[0].size for v in values.values()) + (8 * len(shape) if grid is not None else 0) + outputs
+    _check_memory(shape, per_point, "grid" if grid is not None else "batch")
+    return values, shape
+
+
+def _check_memory(shape: tuple, per_point: int, kind: str) -> None:
+    """Refuses a sweep whose points need more host memory than the machine has."""
+    n, memory = math.prod(shape), host_memory()
+    if memory is None or n * per_point <= memory:
+        return
+    points = " x ".join(map(str, shape)) + f" = {n:,}" if len(shape) > 1 else f"{n:,}"
+    raise ValueError(
+        f"a {kind} of {points} points needs about {_bytes(n * per_point)} of host memory, more than this machine's "
+        f"{_bytes(memory)}: use fewer points, or split it into several sweeps (each with its own out=)"
+    )
+
+
+def host_memory() -> int | None:
+    """The machine's physical memory [bytes], or None where the OS does not say."""
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    raise AssertionError  # unreachable
+
+
+def _columns(robot, grid, batch, outputs: int = 0):
+    """(columns with a leading point axis, sweep shape, grid axes or None)."""
+    values, shape = check_points(robot, grid, batch, outputs)
+    if batch is not None:
+        return values, shape, None
     index = np.meshgrid(*(np.arange(n) for n in shape), indexing="ij")
     return {k: v[i.ravel()] for (k, v), i in zip(values.items(), index, strict=True)}, shape, values
 
@@ -204,10 +253,11 @@ class _Plan(NamedTuple):
     first: int  # this process's first row
 
 
-def _plan(robot, act, load, grid, batch, warm_start, shapes, compliance, devices, gravity, solver) -> _Plan:
+def _plan(robot, act, load, grid, batch, warm_start, shapes, compliance, devices, gravity, solver, outputs=0) -> _Plan:
     """Checks a sweep's arguments and keeps this process's share of the rows (paths with warm
-    starts): the k-th of ``jax.process_count()`` contiguous parts."""
-    base, points, shape, axes = prepare(robot, act, load, grid, batch, gravity=gravity, solver=solver)
+    starts): the k-th of ``jax.process_count()`` contiguous parts. ``outputs``: bytes per point
+    kept in host memory besides the inputs (none when streamed)."""
+    base, points, shape, axes = prepare(robot, act, load, grid, batch, gravity=gravity, solver=solver, outputs=outputs)
     function = _solve_point
     if warm_start:
         if grid is None:
@@ -242,19 +292,27 @@ def _chunks(plan: _Plan, chunk_size, progress, skip: Collection[int] = ()) -> It
 
 
 class _Failures:
-    """Counts the failed points of a stream of chunks and keeps the first failing chunk, so that
-    ``throw`` can name the first failure of a sweep that was never whole in memory."""
+    """Counts the points and the failed points of a stream of chunks and keeps the first failing
+    chunk, so that ``throw`` can name the first failure of a sweep that was never whole in memory."""
 
     def __init__(self):
-        self.count, self.first = 0, None
+        self.points, self.count, self.first, self.written = 0, 0, None, None
 
     def watch(self, chunks: Iterator[SweepChunk]) -> Iterator[SweepChunk]:
         for c in chunks:
             failed = int(np.count_nonzero(c.outputs["result"] != status.SUCCESS))
             if failed and (self.first is None or c.start < self.first.start):
                 self.first = c
+            self.points += c.stop - c.start
             self.count += failed
             yield c
+
+    def summary(self, seconds: float, done_before: bool = False) -> str:
+        """One line: points, failures, time (``8,000 points, 0 failed, 18 s``)."""
+        line = f"{self.points:,} points, {self.count:,} failed"
+        if done_before:
+            return f"{line}: {self.written} was complete already, nothing computed (overwrite=True, tdct sweep --overwrite, recomputes it)"
+        return line + (f", {seconds:.2g} s" if seconds < 10 else f", {seconds:,.0f} s")
 
     def check(self, solver: SolverOptions, throw: bool) -> None:
         if not (throw and self.count):
@@ -263,7 +321,8 @@ class _Failures:
         i = int(np.flatnonzero(c.outputs["result"] != status.SUCCESS)[0])
         out = {k: c.outputs[k][i] for k in ("result", "iterations", "stages", "residual_norm")}
         total = math.prod(c.shape)
-        what = f"the sweep's point {c.start + i} (of {total}; {self.count} failed, throw=False keeps them as result codes)"
+        written = "" if self.written is None else f"; {self.written} was still written with every point's result code"
+        what = f"the sweep's point {c.start + i} (of {total}; {self.count} failed, {{keep_failures}}{written})"
         status.check(
             out["result"],
             throw=True,
@@ -306,22 +365,37 @@ def _fingerprint(plan: _Plan, lanes: int) -> dict:
     }
 
 
+OUT_SUFFIXES = (".npz",)
+OUT_KIND = "a sweep's file format (for a CSV: tdct.gather(out).save_csv(path))"
+"""What ``sweep(out=)`` and ``tdct sweep --out`` take."""
 FAILURE_FIELDS = ("result", "iterations", "stages", "residual_norm")
 """The outputs ``throw`` reads of chunks an earlier run finished."""
 _SWEEP_ONLY = ("out", "overwrite", "throw")
 """``sweep``'s arguments that ``sweep_chunks`` does not take."""
 
 
-def _write(plan: _Plan, out, chunk_size, progress, overwrite: bool, failures: _Failures) -> Path:
+def _write(plan: _Plan, out, chunk_size, progress, overwrite: bool, failures: _Failures) -> tuple[Path, bool]:
     """Streams this process's chunks into the partial folder beside ``out``, each durable before
     the next counts (a rerun of the same sweep computes only the chunks not yet there), then
     assembles the .npz: the whole sweep, or after ``jax.distributed.initialize`` this process's
-    part (flat, with ``points`` = [start, stop))."""
+    part (flat, with ``points`` = [start, stop)). Returns the path and whether it was complete
+    already (the same sweep wrote it): then nothing is computed; its failures count all the same."""
     whole = jax.process_count() == 1
     path = Path(out) if whole else part_path(out, jax.process_index(), jax.process_count())
     rows, per_row = len(next(iter(plan.points.values()))), _per_row(plan)
     lanes = chunk_lanes(plan.kernel, rows, chunk_size)
-    store = Partial.open(path, _fingerprint(plan, lanes), -(-rows // lanes), overwrite=overwrite)
+    fingerprint = _fingerprint(plan, lanes)
+    failures.written = path
+    if complete(path, fingerprint, overwrite=overwrite):
+        with np.load(path) as data:
+            outputs = {
+                name: data[name].reshape(-1, *data[name].shape[len(plan.shape) if whole else 1 :]) for name in FAILURE_FIELDS
+            }
+        start = plan.first * per_row
+        for _ in failures.watch([SweepChunk(start, start + rows * per_row, plan.shape, {}, outputs)]):
+            pass
+        return path, True
+    store = Partial.open(path, fingerprint, -(-rows // lanes), overwrite=overwrite)
 
     def index(c: SweepChunk) -> int:
         return (c.start // per_row - plan.first) // lanes
@@ -341,7 +415,7 @@ def _write(plan: _Plan, out, chunk_size, progress, overwrite: bool, failures: _F
     head = {"shape": np.asarray(plan.shape)} | {f"axis_{name}": v for name, v in (plan.axes or {}).items()}
     head |= {f"input_{name}": v.reshape(flat + v.shape[plan.lead :]) for name, v in plan.points.items()}
     tail = {} if whole else {"points": np.asarray([plan.first * per_row, (plan.first + rows) * per_row])}
-    return store.finish(path, head, flat, tail)
+    return store.finish(path, head, flat, tail), False
 
 
 def sweep_chunks(robot=None, act=None, load=None, **options) -> Iterator[SweepChunk]:
@@ -403,19 +477,22 @@ def sweep(
         chunk_size: configurations per compiled call; bounds device memory. None takes the
             default of the devices' platform per device (``tdct_jax.batch.CHUNK_SIZES``) times
             the number of devices. With several devices each chunk is split evenly over them.
-        progress: show a progress bar on the terminal.
+        progress: show a progress bar on the terminal, and at the end one line on stderr:
+            points, failures, seconds ("8,000 points, 0 failed, 18 s").
         devices: devices to shard each chunk over (default: this process's, ``jax.local_devices()``).
         out: an .npz path to stream the results to, chunk by chunk, with host memory bounded by
             a chunk (uncompressed; same arrays as ``SweepResult.save_npz``). Each finished chunk
             is kept on disk in the folder ``<stem>.partial`` beside it, so that the same call
             after any stop computes only the chunks not yet there (it says so on stderr); the
             folder goes once the file is written, equal byte for byte to an uninterrupted run's.
-            After ``jax.distributed.initialize`` each process solves and writes its own
+            The same call once the file is complete computes nothing (it says so on stderr).
+            The name must end in .npz, and its folder exist and take new files. After ``jax.distributed.initialize`` each process solves and writes its own
             contiguous part of the points, to ``<stem>.partK-of-N.npz`` (and resumes from
             ``<stem>.partK-of-N.partial``); ``out`` is then required. ``tdct.gather(out)`` reads
             the result back either way.
         overwrite: discard a partial folder left by a different sweep (other inputs, robot,
-            solver options, chunk size, devices or package version) instead of refusing it.
+            solver options, chunk size, devices or package version) instead of refusing it, and
+            recompute a file already at ``out`` (a different sweep's is refused otherwise).
         gravity: world gravity [m/s^2] (None: none).
         solver: SolverOptions for every solve.
         throw: after the sweep (and after writing ``out``), raise ConvergenceError naming the
@@ -426,7 +503,9 @@ def sweep(
         SweepResult, or with ``out`` the path written.
 
     Raises:
-        ValueError: bad input, or a partial folder of a different sweep (naming what differs).
+        ValueError: bad input (also a grid or batch too large for host memory, with the
+            estimate), or a partial folder or file at ``out`` of a different sweep (naming what
+            differs).
         ConvergenceError: with ``throw``, when a point failed.
     """
     if out is None and jax.process_count() > 1:
@@ -434,15 +513,29 @@ def sweep(
             f"out = None: a sweep over jax.process_count() = {jax.process_count()} processes needs out=, "
             "the .npz path each process writes its part to (tdct.gather(out) joins them)"
         )
-    plan = _plan(robot, act, load, grid, batch, warm_start, shapes, compliance, devices, gravity, solver)
     start = perf_counter()
+    if out is not None:
+        check_output("out", out, suffixes=OUT_SUFFIXES, kind=OUT_KIND)
+    kept = 0 if out is not None else _output_bytes(shapes, compliance, solver)
+    plan = _plan(robot, act, load, grid, batch, warm_start, shapes, compliance, devices, gravity, solver, kept)
     failures = _Failures()
     if out is not None:
-        path = _write(plan, out, chunk_size, progress, overwrite, failures)
+        path, done_before = _write(plan, out, chunk_size, progress, overwrite, failures)
+        if progress or done_before:
+            print(failures.summary(perf_counter() - start, done_before), file=sys.stderr)
         failures.check(solver, throw)
         return path
     outputs = unflatten(joined([c.outputs for c in failures.watch(_chunks(plan, chunk_size, progress))]), plan.shape)
     inputs = unflatten(plan.points, plan.shape, plan.lead)
     result = SweepResult(shape=plan.shape, axes=plan.axes, inputs=inputs, seconds=perf_counter() - start, **outputs)
+    if progress:
+        print(failures.summary(result.seconds), file=sys.stderr)
     failures.check(solver, throw)
     return result
+
+
+def _output_bytes(shapes: bool, compliance: bool, solver: SolverOptions) -> int:
+    """Host memory per point of an in-memory sweep's outputs (held twice: the chunks, then joined)."""
+    tip = 8 * (3 + 9 + 6 + 1 + 1) + 4 * 3 + 1  # pose, base wrench, residual, tip angle; codes, counts; converged
+    nodes = 2 * solver.steps + 1
+    return 2 * (tip + (32 * nodes if shapes else 0) + (72 if compliance else 0))

@@ -58,7 +58,8 @@ def test_joint_fit_recovers_modulus_and_tendon_offset(robot, start, measured):
 
 
 def test_calibration_that_runs_out_of_steps_says_so(start, measured):
-    fit = tdct.calibrate(start, measured, max_steps=1, progress=False, throw=False)
+    fit = tdct.calibrate(start, measured, "E_silicone", max_steps=1, progress=False, throw=False)  # one name as a string
+    assert fit.params == ("E_silicone",)
     assert not fit.converged and fit.result == tdct.status.OUTER_LIMIT and "max_steps" in fit.message
     with pytest.raises(tdct.ConvergenceError, match="E_silicone did not converge"):
         tdct.calibrate(start, measured, max_steps=1, progress=False, throw=True)
@@ -66,7 +67,13 @@ def test_calibration_that_runs_out_of_steps_says_so(start, measured):
 
 @pytest.mark.parametrize(
     "params, match",
-    [(("E_silcone",), "not a scalar Robot field"), ((), "at least one"), (("E_silicone", "E_silicone"), "each once")],
+    [
+        (("E_silcone",), "not a scalar Robot field"),
+        ((), "at least one"),
+        (("E_silicone", "E_silicone"), "each once"),
+        ("E_silcone", "params: 'E_silcone' is not a scalar Robot field"),  # one name, not its letters
+        (5, "params = 5 must be a Robot field name or a sequence of them"),
+    ],
 )
 def test_bad_parameter_names_are_refused(robot, measured, params, match):
     with pytest.raises(ValueError, match=match):
@@ -132,7 +139,13 @@ def test_cli_synth_then_calibrate_recovers_the_modulus(tmp_path, capsys):
     assert [e["name"][:3] for e in out["experiments"]] == ["t2-", "t4-", "t6-", "t8-", "t10"]
     assert png.stat().st_size > 20_000
     assert main(["calibrate", *map(str, files), "--quiet", "--max-steps", "1"]) == 1
-    assert "did not converge" in capsys.readouterr().err
+    assert "did not converge: hit --max-steps 1; raise it" in capsys.readouterr().err
+    # synth into a folder of shape files: refused, or with --overwrite they are replaced, not mixed
+    assert main(["synth", "--preset", "paper", "--seed", "4", "--out", str(folder)]) == 2
+    assert f"--out {folder}: the folder holds 5 .csv file(s) already" in capsys.readouterr().err
+    (folder / "notes.txt").write_text("kept")
+    assert main(["synth", "--tensions", "3,0,0,0", "--out", str(folder), "--overwrite"]) == 0
+    assert [f.name for f in sorted(folder.iterdir())] == ["01_t3-0-0-0N_d0mm_m0g.csv", "notes.txt"], capsys.readouterr()
     assert main(["calibrate", str(folder), "--params", "E_silcone"]) == 2
     assert "not a scalar Robot field" in capsys.readouterr().err
     assert main(["calibrate", str(tmp_path / "missing.csv")]) == 2

@@ -157,13 +157,17 @@ def test_negative_values_are_read_as_typed(capsys, robot):
         (["synth", "--preset", "paper", "--out", "/proc/x"], "--out /proc/x: cannot write a file in /proc"),
         (["reproduce", "--quick", "--out", "/proc/x"], "--out /proc/x: cannot write a file in /proc"),
         (["calibrate", "shapes", "--plot", "nodir/fit.png"], "--plot nodir/fit.png: the folder nodir does not exist"),
+        (["solve", "--plot", "shape.xyz"], "--plot shape.xyz: .xyz is not an image format matplotlib writes; allowed: none, "),
+        (["calibrate", "shapes", "--plot", "fit.xyz"], "--plot fit.xyz: .xyz is not an image format matplotlib writes"),
+        (["sweep", "spec.toml", "--out", "s.csv"], "--out s.csv: .csv is not a sweep's file format (for a CSV: tdct.gather"),
+        (["sweep", "spec.toml", "--out", "/proc/s.npz"], "--out /proc/s.npz: cannot write a file in /proc"),
     ],
 )
 def test_unwritable_outputs_exit_2_before_any_computation(argv, where, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     computed = []
-    for name in ("solve", "compliance", "calibrate", "synthesize", "reproduce"):
-        for module in ("tdct_jax.cli", "tdct_jax.calibrate", "tdct_jax.reproduce"):
+    for name in ("solve", "compliance", "calibrate", "synthesize", "reproduce", "sweep"):
+        for module in ("tdct_jax.cli", "tdct_jax.calibrate", "tdct_jax.reproduce", "tdct_jax.sweep"):
             if hasattr(importlib.import_module(module), name):
                 monkeypatch.setattr(importlib.import_module(module), name, lambda *a, name=name, **k: computed.append(name))
     assert main(argv) == 2
@@ -183,3 +187,20 @@ def test_inputs_beyond_the_calibrated_range_get_a_note(capsys):
     assert main(["solve", "--tensions", "20,0,0,0", "--no-gravity"]) == 0
     err = capsys.readouterr().err
     assert "tdct: note: tensions up to 20 N are outside the range [0, 10] N this robot was calibrated over" in err
+
+
+def test_version(capsys):
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"tdct {tdct.__version__}"
+
+
+def test_values_typed_in_another_unit_get_a_note(capsys, tmp_path):
+    long = tmp_path / "long.toml"
+    long.write_text("length = 160\n")
+    assert main(["solve", "--robot", str(long), "--tip-mass-g", "-1"]) == 2  # a bad flag stops it before solving
+    err = capsys.readouterr().err
+    assert (
+        f"tdct: note: robot file {long}: length = 160 m is far outside the plausible range [0.005, 5] m: did you mean 160 millimetres (0.16 m)?"
+        in err
+    )
+    assert err.count("tdct: note:") == 1 and "tdct: error: --tip-mass-g -1" in err

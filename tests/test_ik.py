@@ -83,6 +83,17 @@ def test_tracking_a_path_equals_solving_each_target_alone(robot):
             lambda r: tdct.inverse_kinematics(r, (0.0, 0.0, 0.1), objective="stiffness", direction=(0, 0, 0)),
             ["direction", "nonzero"],
         ),
+        (lambda r: tdct.inverse_kinematics(r, (0.0, 0.0, 0.1), tendons=5), ["tendons = 5", "[1, 4]"]),
+        (
+            lambda r: tdct.inverse_kinematics(r, (0.0, 0.0, 0.1), tendons=1, insertion=0.06, objective="stiffness"),
+            ["objective = 'stiffness': nothing to choose: 1 free input(s)", "for 3 task coordinate(s) (x, y, z)", "axes="],
+        ),
+        (
+            lambda r: tdct.inverse_kinematics(r, tdct.Target((0.0, 0.0, 0.1), axes="yz"), tendons=(1,), objective="tension"),
+            ["nothing to choose: 2 free input(s) (tendons (1,) and the insertion) for 2 task coordinate(s) (y, z)"],
+        ),
+        (lambda r: tdct.track(r, tdct.Target(np.zeros((0, 3)))), ["track needs at least one target", "(0, 3)"]),
+        (lambda r: tdct.Target((0.0, 0.0, 0.1), tip_angle=np.radians(400)), ["tip_angle = 6.98", "[-3.14159, 3.14159] rad"]),
     ],
 )
 def test_bad_ik_input_names_field_value_and_range(robot, make, words):
@@ -95,7 +106,20 @@ def test_bad_ik_input_names_field_value_and_range(robot, make, words):
 def test_cli_ik_reaches_prints_json_and_exits_by_status(capsys, robot):
     tip = np.asarray(tdct.solve(robot, tdct.Actuation((5.0, 0, 0, 0), 0.04), tdct.TipLoad.from_mass(0.01)).tip_position)
     target = ",".join(f"{1e3 * x:.9f}" for x in tip)
-    args = ["ik", "--target-mm", target, "--tendons", "1,3", "--tip-mass-g", "10", "--objective", "tension", "--json"]
+    args = [
+        "ik",
+        "--target-mm",
+        target,
+        "--axes",
+        "yz",
+        "--tendons",
+        "1,3",
+        "--tip-mass-g",
+        "10",
+        "--objective",
+        "tension",
+        "--json",
+    ]
     assert main(args) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["status"] == "converged" and out["position_error_mm"] < 1e-6
@@ -108,3 +132,39 @@ def test_cli_ik_reaches_prints_json_and_exits_by_status(capsys, robot):
     assert main(["ik", "--target-mm", "0,0,nan"]) == 2
     assert main(["ik", "--target-mm", "0,0,100", "--tendons", "5"]) == 2
     assert "--tendons 5 is outside the allowed range [1, 4]" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["--tip-angle-deg", "400"], "--tip-angle-deg 400 is outside the allowed range [-180, 180] deg"),
+        (["--axes", "yw"], "--axes yw: the target components that count, each once, from x, y, z"),
+        (["--max-steps", "0"], "--max-steps 0 is outside the allowed range [1, inf]"),
+        (
+            ["--objective", "stiffness", "--tendons", "1", "--insertion-mm", "60"],
+            "--objective stiffness: nothing to choose: 1 free input(s) (tendons 1; --insertion-mm 60 fixes the tube) for 3 "
+            "target component(s) (x, y, z); an objective needs more free inputs than target components: give more --tendons, "
+            "leave out --insertion-mm, or fewer --axes",
+        ),
+        (
+            ["--axes", "y", "--tip-angle-deg", "10", "--tendons", "1", "--objective", "tension"],
+            "for 2 target component(s) (y and the tip angle)",
+        ),
+    ],
+)
+def test_cli_ik_refuses_at_once(argv, words, capsys):
+    assert main(["ik", "--target-mm", "0,30,100", *argv]) == 2
+    err = capsys.readouterr().err
+    assert words in err and "Traceback" not in err
+
+
+def test_cli_ik_target_typed_in_metres_gets_a_note(capsys):
+    argv = ["ik", "--target-mm", "0,0,0.15", "--objective", "stiffness", "--tendons", "1", "--insertion-mm", "60"]
+    assert main(argv) == 2  # nothing to choose: stops before solving
+    assert (
+        "tdct: note: --target-mm 0,0,0.15: 0.15 mm from the base is 0.00094 robot lengths away: did you type metres (150 mm)?"
+        in capsys.readouterr().err
+    )
+    with pytest.warns(tdct.UnitWarning, match=r"target position: 150 m from the base is 938 robot lengths away.* millimetres"):
+        with pytest.raises(ValueError, match="nothing to choose"):
+            tdct.inverse_kinematics(tdct.Robot(), (0.0, 0.0, 150.0), tendons=(1,), insertion=0.0, objective="tension")

@@ -2,12 +2,15 @@
 produce: a 1 mm scan of the redundant input, the first-order optimality conditions from the public
 Jacobians, central differences."""
 
+import json
+
 import jax
 import numpy as np
 import pytest
 from conftest import HEIGHT, MASS
 
 import tdct_jax as tdct
+from tdct_jax.cli import main
 
 
 def test_stiffest_solution_beats_every_solution_of_a_1_mm_insertion_scan(robot, stiffest):
@@ -87,3 +90,14 @@ def test_least_tension_with_two_opposed_tendons_is_reached_and_first_order_optim
     null = np.linalg.svd(G)[2][-1]
     assert abs(grad @ null) <= 1e-6 * np.linalg.norm(grad)
     assert sum(tau**2) <= sum(np.square(made_by[0])) * (1 + 1e-9)  # no worse than the actuation that made it
+
+
+def test_cli_ik_with_a_partial_target_is_the_apis_stiffest_reach(robot, stiffest, capsys):
+    """``tdct ik --axes y``: the redundancy example (a tip height, tendon 1 and the tube) from the
+    command line, the same answer as the API's (conftest's ``stiffest``)."""
+    argv = ["ik", "--target-mm", f"0,{1e3 * HEIGHT:g},0", "--axes", "y", "--tip-mass-g", f"{1e3 * MASS:g}", "--tendons", "1"]
+    assert main([*argv, "--objective", "stiffness", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "converged" and abs(out["tip_position_mm"][1] - 1e3 * HEIGHT) < 1e-6
+    np.testing.assert_allclose(out["tensions_N"], np.asarray(stiffest.actuation.tensions), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(out["insertion_mm"], 1e3 * float(stiffest.actuation.insertion), rtol=1e-9)

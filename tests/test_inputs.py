@@ -186,3 +186,49 @@ def test_inputs_beyond_the_calibrated_range_warn_but_solve(robot, tmp_path):
         tdct.solve(tdct.Robot.from_toml(wide), tdct.Actuation((20.0, 0, 0, 0)), gravity=None)
     with pytest.warns(tdct.CalibrationWarning, match="tip force magnitudes up to 0.8 N"):
         tdct.sweep(robot, batch={"force": [[0.0, -0.8, 0.0]]}, progress=False)
+
+
+@pytest.mark.parametrize(
+    "make, words",
+    [
+        (
+            lambda: tdct.Robot(length=160),
+            "length = 160 m is far outside the plausible range [0.005, 5] m: did you mean 160 millimetres (0.16 m)?",
+        ),
+        (
+            lambda: tdct.Robot(E_silicone=0.85),
+            "E_silicone = 0.85 Pa is far outside the plausible range [1000, 1e+09] Pa: did you mean 0.85 MPa",
+        ),
+        (lambda: tdct.Robot(E_tube=83.0), "did you mean 83 GPa (8.3e+10 Pa)?"),
+        (lambda: tdct.Robot(density_silicone=1.13), "did you mean 1.13 g/cm^3 (1130 kg/m^3)?"),
+        (
+            lambda: tdct.TipLoad.from_mass(0.01, gravity=(0, -9810, 0)),
+            "|gravity| = 9810 m/s^2 is far outside the plausible range [0, 100] m/s^2: did you mean 9810 mm/s^2 (9.81 m/s^2)?",
+        ),
+    ],
+)
+def test_values_typed_in_another_unit_get_a_note_naming_it(make, words):
+    with pytest.warns(tdct.UnitWarning) as caught:
+        make()
+    assert words in str(caught[0].message)
+    assert caught[0].filename == __file__  # attributed to the caller's line
+
+
+def test_plausible_values_get_no_unit_note(tmp_path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", tdct.UnitWarning)
+        tdct.Robot(length=0.5, E_silicone=2e6, tendon_channel_diameter=0.0, density_silicone=0.0)
+        tdct.TipLoad.from_mass(0.01, gravity=(0.0, -1.62, 0.0))  # the moon
+    long = tmp_path / "long.toml"
+    long.write_text("length = 160\n")
+    with pytest.warns(tdct.UnitWarning, match=r"robot file .*long.toml: length = 160 m .* did you mean 160 millimetres"):
+        tdct.Robot.from_toml(long)
+
+
+def test_gather_says_a_file_is_not_a_sweep(tmp_path):
+    (tmp_path / "shape.csv").write_text("s_mm,x_mm\n0,0\n")
+    np.savez(tmp_path / "other.npz", a=np.zeros(2))
+    with pytest.raises(ValueError, match=r"shape.csv: not a tdct sweep result .*: it is not an .npz \(zip\) archive"):
+        tdct.gather(tmp_path / "shape.csv")
+    with pytest.raises(ValueError, match=r"other.npz: not a tdct sweep result .* lacks the arrays \['result', 'shape'"):
+        tdct.gather(tmp_path / "other.npz")

@@ -46,9 +46,18 @@ def test_capacity_is_differentiable_in_robot_parameters(robot):
     assert abs(exact - central) < 1e-6 * abs(central)
 
 
-def test_unreachable_height_gives_zero_capacity(robot):
-    res = tdct.load_capacity(robot, tdct.Actuation((2.0, 0, 0, 0), 0.0), height=0.1, progress=False)
-    assert res.shape == () and not res.reachable and res.mass == 0.0 and res.converged
+def test_a_tip_that_cannot_reach_the_height_is_unreachable(robot, capacities):
+    """3 N on tendon 1 cannot lift even the unloaded tip to y = 0 (the fixture's points beside it:
+    four points with the fixture's inputs, so its compiled program serves)."""
+    batch = {"insertion": [0.0, 0.0, 0.0, 0.07], "tensions": np.outer([3.0, 6.0, 10.0, 10.0], [1.0, 0, 0, 0])}
+    res = tdct.load_capacity(robot, batch=batch, progress=False, throw=False)
+    assert res.result.tolist() == [tdct.status.UNREACHABLE] + [tdct.status.SUCCESS] * 3
+    assert res.reachable.tolist() == [False, True, True, True] and res.mass[0] == 0.0 and not res.converged[0]
+    np.testing.assert_allclose(res.mass[1:], capacities.mass[[0, 0, 1], [0, 1, 1]], rtol=1e-12)
+    with pytest.raises(
+        tdct.ConvergenceError, match=r"target unreachable: even with no tip mass the tip stays below the height y = 0 m"
+    ):
+        tdct.load_capacity(robot, batch=batch, progress=False)
 
 
 def test_optimal_insertion_is_a_stationary_maximum(robot):

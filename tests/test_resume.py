@@ -4,6 +4,7 @@ naming the change; ``tdct sweep SPEC.toml`` equals the Python call; bad specs ex
 
 import importlib
 import os
+import re
 import sys
 
 import jax
@@ -87,6 +88,7 @@ def test_a_killed_sweep_resumes_where_it_stopped(spec, tmp_path, monkeypatch, ca
     err = capfd.readouterr().err
     assert f"resuming from {partial}: {STOP} of {CHUNKS} chunks done" in err
     assert f"| {2 * STOP}/9 [" in err.split("\r")[1]  # the progress bar starts at the points done
+    assert re.search(r"\n9 points, 0 failed, [\d.]+ s\n$", err), err[-300:]  # the sweep's last line
     assert sorted(p.name for p in tmp_path.iterdir()) == ["grid.npz", "grid.toml", "robot.toml"]  # the partial folder is gone
     assert out.read_bytes() == uninterrupted.read_bytes()
 
@@ -159,18 +161,49 @@ def test_a_sweep_stopped_while_joining_its_chunks_computes_nothing(tmp_path, mon
     assert computed == [] and out.read_bytes() == uninterrupted.read_bytes()
 
 
-def test_sweep_command_writes_the_python_calls_file(spec, tmp_path, capsys, uninterrupted):
+def test_sweep_command_writes_the_python_calls_file(spec, tmp_path, capsys, uninterrupted, monkeypatch):
     out = tmp_path / "cli.npz"
     assert main(["sweep", str(spec), "--out", str(out), "--quiet"]) == 0
     assert capsys.readouterr().out.strip() == str(out)
     assert out.read_bytes() == uninterrupted.read_bytes()
+
+    computed = counting(monkeypatch)  # run again: complete, nothing computed
+    assert main(["sweep", str(spec), "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert computed == [] and captured.out.strip() == str(out) and out.read_bytes() == uninterrupted.read_bytes()
+    assert f"9 points, 0 failed: {out} was complete already, nothing computed" in captured.err and "--overwrite" in captured.err
+    spec.write_text(SPEC.replace("steps = 4", "steps = 5"))  # another sweep: refused, naming the change
+    assert main(["sweep", str(spec), "--out", str(out), "--quiet"]) == 2
+    assert f"{out} holds a different, finished sweep (solver.steps: 4 then 5)" in capsys.readouterr().err
+    assert computed == []
+    spec.write_text(SPEC)
+    assert main(["sweep", str(spec), "--out", str(out), "--quiet", "--overwrite"]) == 0  # recomputed
+    assert len(computed) == CHUNKS and out.read_bytes() == uninterrupted.read_bytes()
+
+
+def test_an_interrupted_sweep_command_says_a_rerun_resumes(spec, tmp_path, capsys, monkeypatch):
+    real = sweep_module.iter_batched
+
+    def interrupt(*args, **kwargs):
+        yield next(real(*args, **kwargs))
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sweep_module, "iter_batched", interrupt)
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "grid.npz"), "--quiet"]) == 130
+    err = capsys.readouterr().err
+    assert "tdct: interrupted; the finished chunks are kept: rerunning the same command resumes from them" in err
 
 
 @pytest.mark.parametrize(
     "edit, message",
     [
         (("chunk_size = 2", "chunk_size = 0"), "chunk_size = 0 must be an integer >= 1"),
-        (("[0.0, 0.16, 3]", "[0.0, 0.2, 3]"), "insertion[2] = 0.2 is outside the allowed range [0, 0.16] m"),
+        (("[0.0, 0.16, 3]", "[0.0, 0.2, 3]"), "grid.toml: [grid] insertion[2] = 0.2 is outside the allowed range [0, 0.16] m"),
+        (("insertion = {linspace = [0.0, 0.16, 3]}", "insertion = []"), "grid.toml: [grid] insertion: no values"),
+        (
+            (("chunk_size = 2", "chunk_size = 2\nwarm_start = true"), ("[grid]", "[batch]")),
+            "grid.toml: warm_start = true needs a [grid] table",
+        ),
         (("[0.0, 0.16, 3]", "[0.0, 0.16, 0]"), "grid.insertion.linspace count = 0 must be an integer >= 1"),
         (
             ("tendons = [1]", "tendons = [5]"),
@@ -193,7 +226,10 @@ def test_sweep_command_writes_the_python_calls_file(spec, tmp_path, capsys, unin
     ],
 )
 def test_a_bad_spec_exits_2_naming_key_value_and_range(spec, tmp_path, capsys, edit, message):
-    spec.write_text(SPEC.replace(*edit))
+    text = SPEC
+    for old, new in edit if isinstance(edit[0], tuple) else [edit]:
+        text = text.replace(old, new)
+    spec.write_text(text)
     assert main(["sweep", str(spec), "--out", str(tmp_path / "x.npz"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("tdct: error: ") and err.count("\n") == 1 and message in err, err
@@ -207,6 +243,8 @@ def test_failures_in_finished_chunks_raise_after_the_resume(tmp_path):
     first = int(np.flatnonzero(~whole.converged.ravel())[0])
     assert first < 2  # a point of the first chunk fails
     interrupt_after_first_chunk(tmp_path / "grid.npz", **options)
-    with pytest.raises(tdct.ConvergenceError, match=rf"point {first} \(of 9; {whole.n_failed} failed"):
+    with pytest.raises(tdct.ConvergenceError, match=rf"point {first} \(of 9; {whole.n_failed} failed, throw=False") as e:
         tdct.sweep(ROBOT, BASE, out=tmp_path / "grid.npz", **OPTIONS | options)
+    assert f"{tmp_path / 'grid.npz'} was still written with every point's result code" in str(e.value)
+    assert "their result codes are kept" in e.value.cli_message and "Raise --max-iter" in e.value.cli_message
     np.testing.assert_array_equal(tdct.gather(tmp_path / "grid.npz").result, whole.result, strict=True)

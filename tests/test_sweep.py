@@ -85,6 +85,16 @@ def test_results_save_to_npz_and_csv(grid_sweep, tmp_path):
         (dict(batch={"insertion": [0.0]}, warm_start=True), "warm_start=True needs grid="),
         (dict(), "give exactly one of grid="),
         (dict(grid={"insertion": [0.0]}, chunk_size=0), "chunk_size = 0"),
+        (dict(grid={"insertion": []}), "insertion: no values (an empty list); give at least one point"),
+        (dict(batch={"insertion": [0.0], "tip_mass": []}), "tip_mass: no values"),
+        (
+            dict(
+                grid={name: np.linspace(0.002, 0.005, 1000) for name in ("insertion", "tip_mass", "tendon_offset", "nu_silicone")}
+            ),
+            "a grid of 1000 x 1000 x 1000 x 1000 = 1,000,000,000,000 points needs about",
+        ),
+        (dict(grid={"insertion": [0.0]}, out="x.csv"), "out = 'x.csv': .csv is not a sweep's file format"),
+        (dict(grid={"insertion": [0.0]}, out="/proc/x.npz"), "out = '/proc/x.npz': cannot write a file in /proc"),
     ],
 )
 def test_bad_sweep_input_names_the_field(robot, kwargs, message):
