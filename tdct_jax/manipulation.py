@@ -178,7 +178,7 @@ def insertion_optimum(
     solver: SolverOptions = DEFAULT_SOLVER,
     throw: bool = True,
 ) -> Optimum:
-    """Refines the insertion that maximises y_tip inside a bracket [lo, hi] [m] of the slope's sign change.
+    """Refines the insertion that maximises y_tip inside a bracket ``[lo, hi]`` [m] of the slope's sign change.
 
     The Illinois (modified regula falsi) method on the exact slope dy/dd from autodiff: no
     second derivatives, superlinear convergence, never leaves the bracket. With lo == hi (an

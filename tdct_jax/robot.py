@@ -56,10 +56,14 @@ class Robot:
         tendon_angles: tendon positions about +z from body +x [rad], shape (n_tendons,).
             Default: tendon 1 at +y, then counter-clockwise in 90 degree steps.
         tendon_channel_diameter: diameter of each tendon channel [m].
-        E_silicone, nu_silicone, density_silicone: silicone modulus [Pa], Poisson ratio,
-            density [kg/m^3].
-        tube_outer_diameter, tube_inner_diameter: Nitinol tube annulus [m].
-        E_tube, nu_tube, density_tube: tube modulus [Pa], Poisson ratio, density [kg/m^3].
+        E_silicone: silicone Young's modulus [Pa].
+        nu_silicone: silicone Poisson ratio.
+        density_silicone: silicone density [kg/m^3].
+        tube_outer_diameter: outer diameter of the Nitinol tube [m].
+        tube_inner_diameter: inner diameter of the Nitinol tube [m].
+        E_tube: tube Young's modulus [Pa].
+        nu_tube: tube Poisson ratio.
+        density_tube: tube density [kg/m^3].
         calibrated_tension: (lowest, highest) tension [N] the model was calibrated over (static);
             inputs beyond it get a CalibrationWarning, not an error. Default the paper's 0-10 N.
         calibrated_tip_force: (lowest, highest) tip force magnitude [N] likewise (static);

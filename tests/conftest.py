@@ -39,7 +39,7 @@ def robot():
 
 
 HEIGHT, MASS = 0.03, 0.02
-"""A tip height [m] reached with tendon 1 and the tube, holding a tip mass [kg]: the README's and
+"""A tip height [m] reached with tendon 1 and the tube, holding a tip mass [kg]: the IK guide's and
 the notebook's redundancy example."""
 
 
