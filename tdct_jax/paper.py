@@ -277,10 +277,12 @@ def tip_angle_family(
     common = dict(tendons=(1,), bounds=Bounds(tension=(0.0, tension)), **options)
     rows = []
     with _bar(len(insertions), "Sec. V.B inverse kinematics", "depth", progress) as bar:
-        for d in insertions:
+        for k, d in enumerate(insertions):
+            bar.set_postfix_str("" if k else "compiling")
             r = _reach(robot, positions, "y", len(heights), insertion=d, **common)
             rows.append((r["tip_angle"], r["tensions"][:, 0], r["result"] == 0))
             bar.update()
+        bar.set_postfix_str("")
     angle, tau, ok = (np.stack(x, axis=1) for x in zip(*rows, strict=True))
     return AngleFamily(np.asarray(heights), np.asarray(insertions), angle, tau, ok)
 
