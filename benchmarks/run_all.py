@@ -83,7 +83,13 @@ def summary(suffix: str, seconds: dict) -> str:
                 for r in accuracy["rows"]
             ],
         )
-        lines += [f"Fewest steps within 1 um with a factor 2 to spare: {accuracy['recommended_steps_per_segment']}.", ""]
+        n = sum(accuracy["configurations"].values())
+        lines += [
+            f"Fewest steps per segment with every tip within {accuracy['target_um']:g} um of the "
+            f"{accuracy['reference_steps_per_segment']}-step reference over the {n:,} envelope configurations: "
+            f"{accuracy['recommended_steps_per_segment']}.",
+            "",
+        ]
     if latency:
         lines += _table(
             ("configuration", "warm solve median", "p90", "tip error at this step count"),

@@ -12,14 +12,16 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from tqdm import tqdm
 
 from .calibrate import levenberg_marquardt
 from .ik import Bounds, Target, inverse_kinematics
 from .loads import Actuation, TipLoad
-from .manipulation import capacity, load_capacity, optimal_insertion
+from .manipulation import capacity, insertion_optimum, load_capacity, optimal_insertion
 from .mechanics import compliance, compliance_ellipsoid
 from .options import DEFAULT_SOLVER
 from .robot import Robot
+from .solve import solve
 from .sweep import sweep
 
 MM = 1e-3
@@ -201,9 +203,9 @@ VB_HEIGHTS = tuple(MM * y for y in (0, 20, 40, 60))
 """Sec. V.B study: fixed tip heights y [m] in the z-y plane."""
 VB_INSERTIONS = tuple(MM * d for d in range(0, 161, 10))
 """Sec. V.B study: the tube depths [m] at which tendon 1 is re-solved to hold each height."""
-VA_HEIGHTS = tuple(MM * y for y in (-60, -40, -20, -10))
-"""Sec. V.A as IK: tip heights [m] to reach with 50 g at the tip, stiffest first (all below the highest
-reach, -0.5 mm at 10 N; reproduce adds a height 0.1 mm below it)."""
+VA_HEIGHTS = tuple(MM * y for y in (-60, -40, -20, -10, -5, -2, -1))
+"""Sec. V.A as IK: tip heights [m] to reach with 50 g at the tip, the stiffest way; all below the
+highest reach (-0.5 mm with tendon 1 up to 10 N), where only one actuation is left."""
 VA_MASS = 50 * G
 MAP_TENSIONS = tuple(float(t) for t in np.linspace(2.0, 10.0, 9))
 MAP_INSERTIONS = tuple(MM * d for d in range(0, 161, 20))
@@ -212,6 +214,45 @@ MAP_COUNTER = 1.0
 MAP_COUNTER [N] on tendon 3, at MAP_INSERTIONS [m]: reachable by construction, with every input
 inside its bounds, so that one input is to spare (the reachable set is a band a few millimetres
 wide, which a grid of targets in z and y would mostly miss)."""
+MAP_CHUNK = 16
+"""Stiffness map: most targets per inverse-kinematics call (the progress bar moves once per call)."""
+
+
+def _bar(total: int, desc: str, unit: str, progress: bool):
+    """A progress bar on stderr, like the batch engine's (none without ``progress``)."""
+    return tqdm(total=total, desc=desc, unit=unit, disable=not progress, dynamic_ncols=True)
+
+
+def _reach(robot: Robot, positions, axes: str, chunk: int, bar=None, label: str = "", **options) -> dict:
+    """``inverse_kinematics`` over target positions (k, 3) [m] in calls of at most ``chunk`` targets,
+    all of one size (the last padded by repeating its final target: one compiled program serves them),
+    ticking ``bar`` per target with ``label`` beside it. Returns numpy tensions, insertion,
+    tip_angle and result, (k, ...)."""
+    positions = np.asarray(positions)
+    chunk = -(-len(positions) // -(-len(positions) // chunk))  # calls of equal size, at most chunk
+    parts = []
+    for start in range(0, len(positions), chunk):
+        if bar is not None:
+            bar.set_postfix_str(label + (": compiling" if start == 0 else ""))
+        rows = np.arange(start, min(start + chunk, len(positions)))
+        index = np.concatenate([rows, np.full(chunk - len(rows), rows[-1])])
+        r = inverse_kinematics(robot, Target(positions[index], axes=axes), throw=False, **options)
+        out = dict(tensions=r.actuation.tensions, insertion=r.actuation.insertion, tip_angle=r.tip_angle, result=r.result)
+        parts.append({k: np.asarray(v)[: len(rows)] for k, v in out.items()})
+        if bar is not None:
+            bar.update(len(rows))
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def _compliance_along(robot: Robot, reached: dict, direction, load: TipLoad, bar=None) -> np.ndarray:
+    """direction^T CM direction [m/N] at each actuation ``_reach`` found, NaN where it did not reach."""
+    out = []
+    for t, d, code in zip(reached["tensions"], reached["insertion"], reached["result"], strict=True):
+        c = np.asarray(compliance(robot, Actuation(t, d), load, throw=False)) if code == 0 else np.full((3, 3), np.nan)
+        out.append(direction @ c @ direction)
+        if bar is not None:
+            bar.update()
+    return np.asarray(out)
 
 
 class AngleFamily(NamedTuple):
@@ -227,18 +268,128 @@ class AngleFamily(NamedTuple):
 
 
 def tip_angle_family(
-    robot: Robot, heights=VB_HEIGHTS, insertions=VB_INSERTIONS, tension: float = FIG8A_TENSION, **options
+    robot: Robot, heights=VB_HEIGHTS, insertions=VB_INSERTIONS, tension: float = FIG8A_TENSION, *, progress=True, **options
 ) -> AngleFamily:
     """Sec. V.B: how far the tube lets the tip angle vary while the tip holds a height (tendon 1
-    re-solved by inverse kinematics at every depth, up to ``tension`` [N])."""
-    targets = Target(np.column_stack([np.zeros(len(heights)), heights, np.zeros(len(heights))]), axes="y")
-    bounds = Bounds(tension=(0.0, tension))
+    re-solved by inverse kinematics at every depth, up to ``tension`` [N]). ``progress``: a bar
+    over the depths on stderr; ``options`` go to ``inverse_kinematics``."""
+    positions = np.column_stack([np.zeros(len(heights)), heights, np.zeros(len(heights))])
+    common = dict(tendons=(1,), bounds=Bounds(tension=(0.0, tension)), **options)
     rows = []
-    for d in insertions:
-        r = inverse_kinematics(robot, targets, tendons=(1,), insertion=d, bounds=bounds, throw=False, **options)
-        rows.append((np.asarray(r.tip_angle), np.asarray(r.actuation.tensions)[:, 0], np.asarray(r.result) == 0))
+    with _bar(len(insertions), "Sec. V.B inverse kinematics", "depth", progress) as bar:
+        for k, d in enumerate(insertions):
+            bar.set_postfix_str("" if k else "compiling")
+            r = _reach(robot, positions, "y", len(heights), insertion=d, **common)
+            rows.append((r["tip_angle"], r["tensions"][:, 0], r["result"] == 0))
+            bar.update()
+        bar.set_postfix_str("")
     angle, tau, ok = (np.stack(x, axis=1) for x in zip(*rows, strict=True))
     return AngleFamily(np.asarray(heights), np.asarray(insertions), angle, tau, ok)
+
+
+class HighestReach(NamedTuple):
+    """Sec. V.A: the highest tip height [m] with ``mass`` [kg] at the tip over tendon 1 in
+    [0, ``tension_bound``] [N] and the insertion in [0, L], the actuation that reaches it (tension
+    [N], insertion [m]) and its compliance along -y [m/N]; the first-order conditions there:
+    ``slope_insertion`` = dy/dd (0 at an interior maximum) and ``slope_tension`` = dy/dtau [m/N]
+    (> 0: the bound holds the tension), exact; ``on_bound``: the coarse grid's highest point has
+    the largest tension. ``grid_*``: that grid (heights [m], NaN where a solve failed)."""
+
+    height: float
+    tension: float
+    insertion: float
+    compliance: float
+    slope_insertion: float
+    slope_tension: float
+    on_bound: bool
+    converged: bool
+    mass: float
+    tension_bound: float
+    grid_tensions: np.ndarray
+    grid_insertions: np.ndarray
+    grid_height: np.ndarray
+
+
+@jax.jit
+def _refine(robot: Robot, load: TipLoad, tension, lo, hi, solver):
+    """The insertion in [lo, hi] [m] that maximises y_tip with ``tension`` [N] on tendon 1
+    (``insertion_optimum``), and there: y_tip [m], its exact gradient (d/dtau [m/N], d/dd), the
+    compliance along -y [m/N], and whether every step converged. One compiled program."""
+    tau = jnp.zeros(robot.n_tendons).at[0].set(tension)
+    opt = insertion_optimum(robot, Actuation(tau), load, lo, hi, solver=solver, throw=False)
+
+    def height(x):
+        act = Actuation(jnp.zeros(robot.n_tendons).at[0].set(x[0]), x[1])
+        return solve(robot, act, load, solver=solver, throw=False).tip_position[1]
+
+    x = jnp.stack([jnp.asarray(tension, float), opt.insertion])
+    down = jnp.array([0.0, -1.0, 0.0])
+    CM = compliance(robot, Actuation(tau, opt.insertion), load, solver=solver, throw=False)
+    ok = opt.converged & jnp.all(jnp.isfinite(CM))
+    return opt.insertion, height(x), jax.jacfwd(height)(x), down @ CM @ down, ok
+
+
+def highest_reach(
+    robot: Robot,
+    mass: float = VA_MASS,
+    tension: float = FIG8A_TENSION,
+    *,
+    n_tensions: int = 11,
+    n_insertions: int = 33,
+    solver=DEFAULT_SOLVER,
+    **options,
+) -> HighestReach:
+    """Sec. V.A as an optimisation: the highest tip height with ``mass`` [kg] at the tip, over the
+    tension on tendon 1 in [0, ``tension``] [N] and the insertion in [0, L].
+
+    A grid of n_tensions x n_insertions forward solves locates the maximum. Where it lies on the
+    tension bound (it does for the paper's 50 g at 10 N: pulling harder lifts higher), the problem
+    is one-dimensional in the insertion: ``insertion_optimum`` refines it, between the grid's
+    neighbours of the highest point, to a zero of the exact slope dy/dd (as ``optimal_insertion``
+    does for Fig. 13). The exact gradient there (``jax.jacfwd`` through the implicitly
+    differentiated solve) checks the first-order conditions: dy/dd = 0, dy/dtau > 0. No offset or
+    target height enters the answer.
+
+    Args:
+        robot: the robot.
+        mass: tip mass [kg].
+        tension: the largest tension on tendon 1 [N].
+        n_tensions, n_insertions: the locating grid: tensions 0 to ``tension``, depths 0 to L.
+        solver: SolverOptions for every solve.
+        **options: ``tdct.sweep``'s batching options (progress, chunk_size, devices) and throw.
+
+    Returns:
+        HighestReach.
+    """
+    load = TipLoad.from_mass(mass)
+    taus = np.linspace(0.0, tension, n_tensions)
+    depths = np.linspace(0.0, float(robot.length), n_insertions)
+    grid = sweep(robot, None, load, grid={"tensions": tendon1(robot, taus), "insertion": depths}, solver=solver, **options)
+    heights = np.where(grid.converged, grid.tip_position[..., 1], np.nan)
+    i, k = np.unravel_index(np.nanargmax(heights), heights.shape)
+    lo, hi = depths[max(k - 1, 0)], depths[min(k + 1, n_insertions - 1)]
+    if k in (0, n_insertions - 1):  # an optimum at d = 0 or L: that end
+        lo = hi = depths[k]
+    with _bar(1, "highest reach: insertion refined", "optimum", options.get("progress", True)) as bar:
+        bar.set_postfix_str("compiling")
+        d, y, slopes, c, ok = jax.block_until_ready(_refine(robot, load, float(tension), lo, hi, solver))
+        bar.set_postfix_str("")
+        bar.update()
+    return HighestReach(
+        height=float(y),
+        tension=float(tension),
+        insertion=float(d),
+        compliance=float(c),
+        slope_insertion=float(slopes[1]),
+        slope_tension=float(slopes[0]),
+        on_bound=bool(i == n_tensions - 1),
+        converged=bool(ok) and bool(grid.converged[-1].all()),
+        mass=float(mass),
+        tension_bound=float(tension),
+        grid_tensions=taus,
+        grid_insertions=depths,
+        grid_height=heights,
+    )
 
 
 class StiffestReach(NamedTuple):
@@ -257,33 +408,29 @@ class StiffestReach(NamedTuple):
 
 
 def stiffest_reach(
-    robot: Robot, heights=VA_HEIGHTS, mass: float = VA_MASS, tension: float = FIG8A_TENSION, **options
+    robot: Robot, heights=VA_HEIGHTS, mass: float = VA_MASS, tension: float = FIG8A_TENSION, *, progress=True, **options
 ) -> StiffestReach:
     """Sec. V.A done as inverse kinematics: reach each tip height holding ``mass`` with tendon 1
-    (at most ``tension`` [N]) and the tube, the stiffest way along -y."""
-    targets = Target(np.column_stack([np.zeros(len(heights)), heights, np.zeros(len(heights))]), axes="y")
-    common = dict(load=TipLoad.from_mass(mass), tendons=(1,), bounds=Bounds(tension=(0.0, tension)), throw=False, **options)
-    best = inverse_kinematics(robot, targets, objective="stiffness", direction=(0.0, -1.0, 0.0), **common)
-    plain = inverse_kinematics(robot, targets, insertion=0.0, **common)
+    (at most ``tension`` [N]) and the tube, the stiffest way along -y, and with tendon 1 alone.
+    ``progress``: a bar over the targets on stderr (one per call); ``options`` go to
+    ``inverse_kinematics``."""
+    positions = np.column_stack([np.zeros(len(heights)), heights, np.zeros(len(heights))])
+    load = TipLoad.from_mass(mass)
+    common = dict(load=load, tendons=(1,), bounds=Bounds(tension=(0.0, tension)), **options)
     down = np.array([0.0, -1.0, 0.0])
-
-    def along(result):
-        ok = np.asarray(result.result) == 0
-        CM = [
-            np.asarray(compliance(robot, Actuation(t, d), TipLoad.from_mass(mass), throw=False))
-            for t, d in zip(np.asarray(result.actuation.tensions), np.asarray(result.actuation.insertion), strict=True)
-        ]
-        return np.where(ok, [down @ c @ down for c in CM], np.nan)
-
+    with _bar(2 * len(heights), "Sec. V.A inverse kinematics", "target", progress) as bar:
+        best = _reach(robot, positions, "y", 1, bar, "stiffest", objective="stiffness", direction=down, **common)
+        plain = _reach(robot, positions, "y", 1, bar, "tendon 1 alone", insertion=0.0, **common)
+        bar.set_postfix_str("")
     return StiffestReach(
         np.asarray(heights),
         mass,
-        np.asarray(best.actuation.tensions)[:, 0],
-        np.asarray(best.actuation.insertion),
-        along(best),
-        np.asarray(best.result) == 0,
-        np.where(np.asarray(plain.result) == 0, np.asarray(plain.actuation.tensions)[:, 0], np.nan),
-        along(plain),
+        best["tensions"][:, 0],
+        best["insertion"],
+        _compliance_along(robot, best, down, load),
+        best["result"] == 0,
+        np.where(plain["result"] == 0, plain["tensions"][:, 0], np.nan),
+        _compliance_along(robot, plain, down, load),
     )
 
 
@@ -304,30 +451,40 @@ class StiffnessMap(NamedTuple):
 
 
 def stiffness_map(
-    robot: Robot, tensions=MAP_TENSIONS, insertions=MAP_INSERTIONS, counter: float = MAP_COUNTER, **options
+    robot: Robot,
+    tensions=MAP_TENSIONS,
+    insertions=MAP_INSERTIONS,
+    counter: float = MAP_COUNTER,
+    *,
+    progress=True,
+    chunk: int = MAP_CHUNK,
+    **options,
 ) -> StiffnessMap:
     """Where, and by how much, choosing the redundant input for stiffness (two in-plane
     coordinates, three inputs: tendons 1 and 3 and the insertion) lowers the tip compliance along
-    -y against the least-tension choice, over targets made by forward solves (see MAP_COUNTER)."""
+    -y against the least-tension choice, over targets made by forward solves (see MAP_COUNTER).
+    ``progress``: bars on stderr; ``chunk``: targets per IK call; ``options`` go to
+    ``inverse_kinematics``."""
     made = sweep(
         robot,
         grid={"tensions": np.outer(tensions, [1.0, 0, 0, 0]) + counter * np.array([0, 0, 1.0, 0]), "insertion": insertions},
-        progress=False,
+        progress=progress,
     )
     tips = made.tip_position.reshape(-1, 3)
-    targets = Target(np.column_stack([np.zeros(len(tips)), tips[:, 1], tips[:, 2]]), axes="yz")
+    positions = np.column_stack([np.zeros(len(tips)), tips[:, 1], tips[:, 2]])
     down = np.array([0.0, -1.0, 0.0])
     out = {}
-    for name, objective in (("least_tension", "tension"), ("stiffest", "stiffness")):
-        extra = dict(direction=down) if objective == "stiffness" else {}
-        r = inverse_kinematics(robot, targets, tendons=(1, 3), objective=objective, throw=False, **extra, **options)
-        ok = np.asarray(r.result) == 0
-        acts = zip(np.asarray(r.actuation.tensions), np.asarray(r.actuation.insertion), strict=True)
-        c = [down @ np.asarray(compliance(robot, Actuation(t, d), throw=False)) @ down for t, d in acts]
-        out[name] = (
-            np.where(ok, c, np.nan).reshape(made.shape),
-            np.where(ok, np.asarray(r.actuation.insertion), np.nan).reshape(made.shape),
-        )
+    with _bar(2 * len(tips), "stiffness map inverse kinematics", "target", progress) as bar:
+        for name, objective in (("least_tension", "tension"), ("stiffest", "stiffness")):
+            extra = dict(direction=down) if objective == "stiffness" else {}
+            label = name.replace("_", " ")
+            r = _reach(robot, positions, "yz", chunk, bar, label, tendons=(1, 3), objective=objective, **extra, **options)
+            ok = r["result"] == 0
+            out[name] = (
+                _compliance_along(robot, r, down, TipLoad()).reshape(made.shape),
+                np.where(ok, r["insertion"], np.nan).reshape(made.shape),
+            )
+        bar.set_postfix_str("")
     return StiffnessMap(
         np.asarray(tensions),
         np.asarray(insertions),

@@ -1,13 +1,44 @@
-"""Figures (the only module that imports matplotlib). Axes in millimetres and degrees."""
+"""Figures (the only module that imports matplotlib). Axes in millimetres and degrees.
+
+Every figure is drawn under ``STYLE`` (font sizes readable on a slide, matplotlib's mathtext for
+symbols such as the labels in ``LABEL``); the user's own rcParams are left as they were.
+"""
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import jax
 import numpy as np
 
 from .solve import Solution
+
+STYLE = {
+    "font.size": 12,
+    "axes.titlesize": 13,
+    "axes.labelsize": 13,
+    "xtick.labelsize": 11.5,
+    "ytick.labelsize": 11.5,
+    "legend.fontsize": 11,
+    "legend.title_fontsize": 11.5,
+    "figure.titlesize": 14,
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+    "savefig.dpi": 130,
+}
+"""rcParams every figure of this module is drawn with: the one place its fonts are set."""
+LABEL = dict(
+    z_tip=r"$z_{\mathrm{tip}}$ [mm]",
+    y_tip=r"$y_{\mathrm{tip}}$ [mm]",
+    theta_tip=r"$\theta_{\mathrm{tip}}$ [deg]",
+    z=r"$z$ [mm]",
+    y=r"$y$ [mm]",
+    insertion=r"insertion depth $d$ [mm]",
+    target_height=r"target tip height $y_{\mathrm{tip}}$ [mm]",
+    compliance_down=r"tip compliance along $-y$ [mm/N]",
+)
+"""Axis labels used by several figures, in mathtext."""
 
 
 def _pyplot():
@@ -20,11 +51,23 @@ def _pyplot():
     return plt
 
 
+def _styled(plot):
+    """Draws ``plot`` (a function of this module) under STYLE, without touching global rcParams."""
+
+    @functools.wraps(plot)
+    def styled(*args, **kwargs):
+        with _pyplot().rc_context(STYLE):
+            return plot(*args, **kwargs)
+
+    return styled
+
+
 def _finish(fig, path):
     """Saves the figure as a PNG when a path is given (and closes it); returns it either way."""
-    fig.tight_layout()
+    if fig.get_layout_engine() is None:
+        fig.tight_layout()
     if path is not None:
-        fig.savefig(path, dpi=120)
+        fig.savefig(path)
         _pyplot().close(fig)
     return fig
 
@@ -34,6 +77,7 @@ def _tube_mask(s, insertion):
     return np.asarray(s) <= insertion + 1e-12 if insertion > 0 else np.zeros(np.shape(s), bool)
 
 
+@_styled
 def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, title: str | None = None, target=None):
     """Side view (world z-y plane) and 3D view of one solved shape; the tube part drawn thick.
 
@@ -61,7 +105,7 @@ def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, 
     ax.set_ylabel("y [mm]")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_title(f"side view: tip angle {np.degrees(float(sol.tip_angle)):.1f} deg")
-    ax.legend(loc="best", fontsize=8)
+    ax.legend(loc="best")
     ax.grid(alpha=0.3)
     ax3 = fig.add_subplot(1, 2, 2, projection="3d")
     ax3.plot(p[:, 0], p[:, 2], p[:, 1], color="tab:blue", lw=2)
@@ -89,6 +133,7 @@ def _equal_3d(ax3, p):
     ax3.set_zlim(mid[1] - span, mid[1] + span)
 
 
+@_styled
 def plot_calibration(solutions: Solution, experiments, path: str | Path | None = None, title: str | None = None):
     """Model shapes (lines) over measured shapes (markers), like the paper's Figs. 6 and 7.
 
@@ -126,7 +171,7 @@ def plot_calibration(solutions: Solution, experiments, path: str | Path | None =
     ax.set_ylabel("y [mm]")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_title("side view (paper Fig. 6)")
-    ax.legend(loc="best", fontsize=7)
+    ax.legend(loc="best")
     ax.grid(alpha=0.3)
     _equal_3d(ax3, np.concatenate(every))
     ax3.set_title("3D (paper Fig. 7)")
@@ -135,6 +180,7 @@ def plot_calibration(solutions: Solution, experiments, path: str | Path | None =
     return _finish(fig, path)
 
 
+@_styled
 def plot_fd_error(rows, path: str | Path):
     """Relative error of finite-difference compliance against the exact one vs the FD step (V curve).
 
@@ -150,55 +196,63 @@ def plot_fd_error(rows, path: str | Path):
     ax.set_ylabel("relative error of FD compliance vs exact")
     ax.set_title("Central differences against the exact (autodiff) CM")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
+    ax.legend()
     _finish(fig, path)
 
 
-def plot_compliance_ellipses(CMs: dict, path: str | Path | None = None, title: str | None = None):
+@_styled
+def plot_compliance_ellipses(
+    CMs: dict, path: str | Path | None = None, title: str | None = None, legend_title: str | None = None
+):
     """Compliance ellipsoids {CM f : |f| = 1} projected on the plane of the first one's two largest
-    axes (paper Fig. 10), in mm/N.
+    axes, mu_3 and mu_2 (paper Fig. 10), in mm/N; a note gives the third, lambda_1, left out.
 
     Args:
         CMs: label -> 3x3 compliance matrix [m/N]; the first sets the projection plane.
         path: where to save a PNG; the figure is returned either way.
         title: axes title.
+        legend_title: the legend's title (the legend sits inside the innermost ellipse).
     """
     plt = _pyplot()
     mats = {k: np.asarray(v) * 1e3 for k, v in CMs.items()}
     U, _, _ = np.linalg.svd(next(iter(mats.values())))
     plane = U[:, :2]
     t = np.linspace(0, 2 * np.pi, 200)
-    fig, ax = plt.subplots(figsize=(5.6, 5.2))
+    fig, ax = plt.subplots(figsize=(6.4, 6.4))
     for label, CM in mats.items():
         u, s, _ = np.linalg.svd(plane.T @ CM)
         xy = u @ (s[:, None] * np.stack([np.cos(t), np.sin(t)]))
-        ax.plot(xy[0], xy[1], lw=2, label=label)
+        ax.plot(xy[0], xy[1], lw=2.2, label=label)
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("along the major axis [mm/N]")
-    ax.set_ylabel("along the second axis [mm/N]")
+    ax.set_xlabel(r"along the major axis $\mu_3$ [mm/N]")
+    ax.set_ylabel(r"along $\mu_2$ [mm/N]")
     ax.set_title(title or "compliance ellipse (tip displacement per N of tip force)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(loc="center", title=legend_title, frameon=False, handlelength=1.2, borderaxespad=0)
+    smallest = max(np.linalg.svd(CM, compute_uv=False)[-1] for CM in mats.values())
+    note = rf"left out: $\lambda_1$ (along $\mu_1$, near the tip's tangent), at most {smallest:.2g} mm/N"
+    fig.text(0.5, 0.01, note, ha="center", va="bottom", fontsize="medium", color="0.3")
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
     return _finish(fig, path)
 
 
+@_styled
 def plot_fig11(tensions, insertions, lam, path: str | Path | None = None):
     """Paper Fig. 11: lambda_1..3 of CM [mm/N] against insertion depth [mm], one colour per tension."""
     plt = _pyplot()
     d_mm = np.asarray(insertions) * 1e3
-    fig, axes = plt.subplots(1, 3, figsize=(13, 4.2))
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.6))
     colours = plt.cm.viridis(np.linspace(0, 0.9, len(tensions)))
     for k, ax in enumerate(axes):
         for tau, c, row in zip(tensions, colours, np.asarray(lam), strict=True):
-            ax.plot(d_mm, row[:, k] * 1e3, "o-", ms=3, color=c, label=f"{tau:g} N")
-        ax.set_xlabel("insertion depth [mm]")
-        ax.set_ylabel(f"lambda_{k + 1} [mm/N]")
-        ax.grid(alpha=0.3)
-    axes[0].legend(title="tendon 1 tension", fontsize=8)
+            ax.plot(d_mm, row[:, k] * 1e3, "o-", ms=3.5, color=c, label=f"{tau:g} N")
+        ax.set_xlabel(LABEL["insertion"])
+        ax.set_ylabel(rf"$\lambda_{k + 1}$ [mm/N]")
+    axes[0].legend(title="tendon 1 tension")
     fig.suptitle("Eigenvalues of the tip compliance matrix (paper Fig. 11)")
     return _finish(fig, path)
 
 
+@_styled
 def plot_fig8a(res, path: str | Path | None = None):
     """Paper Fig. 8A: side views of the shape as the tube goes in; arrow: the tip's motion.
 
@@ -208,72 +262,81 @@ def plot_fig8a(res, path: str | Path | None = None):
     plt = _pyplot()
     depths = np.asarray(res.axes["insertion"])
     tension = float(np.asarray(res.axes["tensions"])[0, 0])
-    fig, ax = plt.subplots(figsize=(7.5, 5.2))
+    fig, ax = plt.subplots(figsize=(8.5, 5.8))
     colours = plt.cm.plasma(np.linspace(0, 0.85, len(depths)))
     for i, (d, c) in enumerate(zip(depths, colours, strict=True)):
         p = res.position[i, 0] * 1e3
         tube = _tube_mask(res.s[i, 0], d)
-        ax.plot(p[:, 2], p[:, 1], color=c, lw=2, zorder=3, label=f"d = {d * 1e3:.0f} mm")
+        ax.plot(p[:, 2], p[:, 1], color=c, lw=2, zorder=3, label=f"$d$ = {d * 1e3:.0f} mm")
         if tube.any():
             ax.plot(p[tube, 2], p[tube, 1], color="black", lw=6, zorder=2, solid_capstyle="butt")
             ax.plot(*p[tube][-1, [2, 1]], "o", mfc="white", mec="black", ms=6, zorder=4)
     ax.plot([], [], color="black", lw=6, label="inside the tube")
-    ax.plot([], [], "o", mfc="white", mec="black", ms=6, label="tube end (s = d)")
+    ax.plot([], [], "o", mfc="white", mec="black", ms=6, label="tube end ($s = d$)")
     tips = res.tip_position[:, 0] * 1e3
     ax.annotate("", xy=tips[-1, [2, 1]], xytext=tips[0, [2, 1]], arrowprops=dict(arrowstyle="->", color="red", lw=2))
     ax.axhline(0, color="0.8", lw=0.8, zorder=0)
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("z [mm]")
-    ax.set_ylabel("y [mm]")
-    ax.set_title(f"Shape as the tube is inserted: {tension:g} N on tendon 1, no tip load (paper Fig. 8A)")
-    ax.legend(fontsize=8, loc="upper left")
-    ax.grid(alpha=0.3)
+    ax.set_xlabel(LABEL["z"])
+    ax.set_ylabel(LABEL["y"])
+    ax.set_title(f"Shape as the tube goes in: {tension:g} N on tendon 1, no tip load (paper Fig. 8A)")
+    ax.legend(loc="upper left")
     return _finish(fig, path)
 
 
+@_styled
 def plot_fig8b(res, path: str | Path | None = None):
-    """Paper Fig. 8B: tip workspace without (curve, d = 0) and with the insertion degree of freedom.
+    """Paper Fig. 8B: the tip workspace of tendon 1 alone (a curve, d = 0) and with the insertion
+    (a band: every tension and insertion of the grid), in the z-y plane at equal scales.
 
     Args:
         res: SweepResult of ``paper.tip_pose_grid`` (tension axis first, insertion second).
     """
+    from matplotlib.collections import PolyCollection
+
     plt = _pyplot()
-    tip = res.tip_position * 1e3
-    fig, ax = plt.subplots(figsize=(6.8, 5.6))
-    ax.plot(tip[..., 2].ravel(), tip[..., 1].ravel(), ".", color="0.6", ms=4, label="grid points (tension x insertion)")
-    edge = np.concatenate([tip[:, 0], tip[-1, 1:], tip[::-1, -1][1:], tip[0, ::-1][1:]])
-    ax.plot(edge[:, 2], edge[:, 1], "--", color="red", lw=1.8, label="workspace with insertion")
-    ax.plot(tip[:, 0, 2], tip[:, 0, 1], "-", color="black", lw=2.5, label="tendon only (d = 0 mm)")
+    tip = res.tip_position[..., [2, 1]] * 1e3  # (tension, insertion, (z, y))
     depths = np.asarray(res.axes["insertion"]) * 1e3
     taus = np.asarray(res.axes["tensions"])[:, 0]
-    ax.set_xlabel("z_tip [mm]")
-    ax.set_ylabel("y_tip [mm]")
-    ax.set_title(f"Tip workspace: tendon 1 at {taus[0]:g}-{taus[-1]:g} N, insertion {depths[0]:g}-{depths[-1]:g} mm")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    fig, ax = plt.subplots(figsize=(6.6, 7.8))
+    cells = np.stack([tip[:-1, :-1], tip[1:, :-1], tip[1:, 1:], tip[:-1, 1:]], axis=2).reshape(-1, 4, 2)
+    band = "#74add1"
+    ax.add_collection(PolyCollection(cells, facecolors=band, edgecolors=band, linewidths=0.6, zorder=1))
+    ax.fill([], [], color=band, label=f"tendon 1 and the tube,\n$d$ = {depths[0]:g}-{depths[-1]:g} mm")
+    ax.plot(tip[:, -1, 0], tip[:, -1, 1], "-", color="navy", lw=1.2, zorder=2, label=f"$d$ = {depths[-1]:g} mm")
+    ax.plot(tip[:, 0, 0], tip[:, 0, 1], "o-", color="black", lw=1.5, ms=3.5, zorder=3, label="tendon 1 alone ($d$ = 0)")
+    for i in sorted({0, len(taus) // 2, len(taus) - 1}):
+        ax.annotate(f"{taus[i]:g} N", tip[i, 0], xytext=(10, 0), textcoords="offset points", ha="left", va="center")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel(LABEL["z_tip"])
+    ax.set_ylabel(LABEL["y_tip"])
+    ax.set_title(f"Tip workspace (paper Fig. 8B): tendon 1 at {taus[0]:g}-{taus[-1]:g} N")
+    ax.legend(loc="center left", fontsize="small")
     return _finish(fig, path)
 
 
+@_styled
 def plot_fig9(res, path: str | Path | None = None):
     """Paper Fig. 9A-C: z_tip, y_tip [mm] and theta_tip [deg] against insertion, one line per tension."""
     plt = _pyplot()
     depths = np.asarray(res.axes["insertion"]) * 1e3
     taus = np.asarray(res.axes["tensions"])[:, 0]
     values = (res.tip_position[..., 2] * 1e3, res.tip_position[..., 1] * 1e3, np.degrees(res.tip_angle))
-    labels = ("(A) z_tip [mm]", "(B) y_tip [mm]", "(C) theta_tip [deg]")
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.4))
+    labels = (LABEL["z_tip"], LABEL["y_tip"], LABEL["theta_tip"])
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
     colours = plt.cm.viridis(np.linspace(0, 0.95, len(taus)))
-    for ax, v, label in zip(axes, values, labels, strict=True):
+    for ax, v, label, letter in zip(axes, values, labels, "ABC", strict=True):
         for tau, c, row in zip(taus, colours, v, strict=True):
-            ax.plot(depths, row, "o-", ms=2.5, color=c, label=f"{tau:g} N")
-        ax.set_xlabel("insertion depth [mm]")
+            ax.plot(depths, row, "o-", ms=3, color=c, label=f"{tau:g} N")
+        ax.set_xlabel(LABEL["insertion"])
         ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
-    axes[2].legend(title="tendon 1 tension", fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+        ax.set_title(f"({letter})")
+    axes[2].legend(title="tendon 1\ntension", loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize="small")
     fig.suptitle("Tip pose against tube insertion, no tip load (paper Fig. 9)")
     return _finish(fig, path)
 
 
+@_styled
 def plot_fig13(results: dict, path: str | Path | None = None):
     """Paper Fig. 13: y_tip [mm] against insertion [mm] for several tip masses, optimum as a black dot.
 
@@ -281,26 +344,26 @@ def plot_fig13(results: dict, path: str | Path | None = None):
         results: {tension [N]: GridResult of ``paper.fig13_optima``}, one panel each.
     """
     plt = _pyplot()
-    fig, axes = plt.subplots(1, len(results), figsize=(6.2 * len(results) + 1.3, 4.6), squeeze=False)
+    fig, axes = plt.subplots(1, len(results), figsize=(6.6 * len(results) + 1.6, 5.0), squeeze=False)
     all_masses = [np.asarray(r.axes["tip_mass"]).tolist() for r in results.values()]
     shared = all(m == all_masses[0] for m in all_masses)  # then one legend serves every panel
     for k, (ax, (tension, r), letter) in enumerate(zip(axes[0], results.items(), "ABCD", strict=False)):
         masses = np.asarray(r.axes["tip_mass"]) * 1e3
         colours = plt.cm.cividis(np.linspace(0, 0.9, len(masses)))
         for i, (m, c) in enumerate(zip(masses, colours, strict=True)):
-            ax.plot(r.curve_insertion * 1e3, r.curve_height[i] * 1e3, "-", color=c, label=f"{m:g} g")
-            ax.plot(r.insertion[i] * 1e3, r.height[i] * 1e3, "o", color="black", ms=5)
-        ax.plot([], [], "o", color="black", ms=5, label="maximum of y_tip")
-        ax.set_xlabel("insertion depth [mm]")
-        ax.set_ylabel("y_tip [mm]")
+            ax.plot(r.curve_insertion * 1e3, r.curve_height[i] * 1e3, "-", lw=2, color=c, label=f"{m:g} g")
+            ax.plot(r.insertion[i] * 1e3, r.height[i] * 1e3, "o", color="black", ms=6)
+        ax.plot([], [], "o", color="black", ms=6, label=r"maximum of $y_{\mathrm{tip}}$")
+        ax.set_xlabel(LABEL["insertion"])
+        ax.set_ylabel(LABEL["y_tip"])
         ax.set_title(f"({letter}) tendon 1 at {tension:g} N")
-        ax.grid(alpha=0.3)
         if not shared or k == len(results) - 1:
-            ax.legend(title="tip mass", fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+            ax.legend(title="tip mass", loc="upper left", bbox_to_anchor=(1.02, 1.0))
     fig.suptitle("Tip height against insertion for several tip masses (paper Fig. 13)")
     return _finish(fig, path)
 
 
+@_styled
 def plot_fig14(res, paper_points=None, path: str | Path | None = None):
     """Paper Fig. 14: load capacity [g] against insertion [mm], one line per tension.
 
@@ -312,99 +375,120 @@ def plot_fig14(res, paper_points=None, path: str | Path | None = None):
     plt = _pyplot()
     depths = np.asarray(res.axes["insertion"]) * 1e3
     taus = np.asarray(res.axes["tensions"])[:, 0]
-    fig, ax = plt.subplots(figsize=(8.2, 4.8))
+    fig, ax = plt.subplots(figsize=(9.2, 5.4))
     colours = plt.cm.viridis(np.linspace(0, 0.9, len(taus)))
     for i, (tau, c) in enumerate(zip(taus, colours, strict=True)):
-        ax.plot(depths, res.mass[i] * 1e3, "o-", ms=3, color=c, label=f"{tau:g} N")
+        ax.plot(depths, res.mass[i] * 1e3, "o-", ms=3.5, color=c, label=f"{tau:g} N")
         if paper_points is not None:
             d, g = paper_points
-            ax.plot(np.asarray(d) * 1e3, np.asarray(g)[:, i], "x", color=c, ms=9, mew=2)
+            ax.plot(np.asarray(d) * 1e3, np.asarray(g)[:, i], "x", color=c, ms=10, mew=2.2)
     if paper_points is not None:
-        ax.plot([], [], "x", color="black", ms=9, mew=2, label="paper (Sec. V.A)")
-    ax.set_xlabel("insertion depth [mm]")
-    ax.set_ylabel("load capacity (tip reaches y = 0) [g]")
+        ax.plot([], [], "x", color="black", ms=10, mew=2.2, label="paper (Sec. V.A)")
+    ax.set_xlabel(LABEL["insertion"])
+    ax.set_ylabel(r"load capacity [g] (tip at $y = 0$)")
     ax.set_title("Tip load capacity against insertion (paper Fig. 14)")
-    ax.grid(alpha=0.3)
-    ax.legend(title="tendon 1 tension", fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.legend(title="tendon 1 tension", loc="upper left", bbox_to_anchor=(1.01, 1.0))
     return _finish(fig, path)
 
 
+@_styled
 def plot_tip_angle_family(family, path: str | Path | None = None):
-    """Sec. V.B: tip angle against insertion at fixed tip heights (left), and the range of angles
-    each height allows (right), against the single angle of the tendon-only robot."""
+    """Sec. V.B: tip angle against insertion at fixed tip heights (left), and at each height (the
+    few that were solved: markers, not a continuum) the range of angles the tube allows against
+    the single angle of the tendon-only robot (right); both share the tip-angle axis."""
     plt = _pyplot()
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.4))
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12.5, 5.0), sharey=True, gridspec_kw=dict(width_ratios=(3, 2)))
     colors = plt.cm.viridis(np.linspace(0, 0.9, len(family.heights)))
     d_mm = family.insertions * 1e3
-    low, high, plain = [], [], []
-    for k, (h, c) in enumerate(zip(family.heights, colors, strict=True)):
+    y_mm = family.heights * 1e3
+    for k, (h, c) in enumerate(zip(y_mm, colors, strict=True)):
         ok = family.reached[k]
         angle = np.degrees(np.where(ok, family.tip_angle[k], np.nan))
-        ax.plot(d_mm, angle, "o-", color=c, ms=3, label=f"y = {h * 1e3:g} mm")
-        low.append(np.nanmin(angle) if ok.any() else np.nan)
-        high.append(np.nanmax(angle) if ok.any() else np.nan)
-        plain.append(angle[0] if ok[0] else np.nan)
-    ax.set(xlabel="tube insertion [mm]", ylabel="tip angle [deg]", title="tip held at a height, tendon 1 re-solved")
-    ax.legend(fontsize=8, title="tip height", title_fontsize=8)
-    ax.grid(alpha=0.3)
-    y_mm = family.heights * 1e3
-    bx.fill_betweenx(y_mm, low, high, color="tab:blue", alpha=0.25, label="reachable with the tube")
-    bx.plot(low, y_mm, color="tab:blue")
-    bx.plot(high, y_mm, color="tab:blue")
-    bx.plot(plain, y_mm, "ks", label="tendon 1 alone (no tube)")
-    bx.set(xlabel="tip angle [deg]", ylabel="tip height y [mm]", title="range of tip angles at each height")
-    bx.legend(fontsize=8, loc="lower right")
-    bx.grid(alpha=0.3)
+        ax.plot(d_mm, angle, "o-", color=c, ms=3.5, label=f"{h:g} mm")
+        if not ok.any():
+            continue
+        lo, hi = np.nanmin(angle), np.nanmax(angle)
+        bx.plot([h, h], [lo, hi], "-", color=c, lw=7, alpha=0.45, solid_capstyle="butt")
+        bx.plot([h, h], [lo, hi], "_", color=c, ms=22, mew=2)
+        bx.annotate(f"{hi - lo:.1f}°", (h, hi), xytext=(0, 8), textcoords="offset points", ha="center")
+        if ok[0]:
+            bx.plot(h, angle[0], "ks", ms=8, zorder=3)
+    ax.set(xlabel="tube insertion $d$ [mm]", ylabel=LABEL["theta_tip"], title="tip held at a height, tendon 1 re-solved")
+    ax.legend(title=r"tip height $y_{\mathrm{tip}}$", loc="upper right", fontsize="small")
+    bx.plot([], [], "-", color="0.5", lw=7, alpha=0.45, label="range with the tube")
+    bx.plot([], [], "ks", ms=8, label="tendon 1 alone ($d$ = 0)")
+    bx.set(xlabel=r"tip height $y_{\mathrm{tip}}$ [mm]", title="tip angles at each height")
+    bx.set_xticks(y_mm)
+    span = max(np.ptp(y_mm), 1.0)
+    bx.set_xlim(y_mm.min() - 0.15 * span, y_mm.max() + 0.15 * span)
+    bx.tick_params(labelleft=True)
+    bx.legend(loc="lower right")
+    lo, hi = ax.get_ylim()
+    ax.set_ylim(lo, hi + 0.08 * (hi - lo))  # room for the ranges' labels above the highest
     fig.suptitle("Sec. V.B: the tube insertion as a redundant input for the tip angle")
     return _finish(fig, path)
 
 
-def plot_stiffest_reach(reach, optimum=None, path: str | Path | None = None):
-    """Sec. V.A as IK: the stiffest actuation for each target height (insertion and tension), and
-    its compliance along -y against the tendon-only actuation's. ``optimum``: (highest height [m],
-    its insertion [m]) from the optimal-insertion study, marked."""
+@_styled
+def plot_stiffest_reach(reach, top=None, path: str | Path | None = None):
+    """Sec. V.A: the stiffest actuation for each target height (left: insertion, bottom axis;
+    tendon-1 tension, top axis) and its compliance along -y against the tendon-only actuation's
+    (right). ``top``: the highest reach (``paper.HighestReach``), where each curve ends, marked."""
     plt = _pyplot()
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2))
-    y_mm = reach.heights * 1e3
-    ax.plot(np.where(reach.reached, reach.insertion * 1e3, np.nan), y_mm, "o-", color="tab:blue", label="stiffest: insertion")
-    if optimum is not None:
-        ax.plot(optimum[1] * 1e3, optimum[0] * 1e3, "r*", ms=12, label=f"highest reach ({optimum[1] * 1e3:.0f} mm of tube)")
-        ax.axvline(70, color="0.5", ls="--", lw=1, label="paper: 70 mm (grid search)")
-    ax.set(xlabel="tube insertion [mm]", ylabel="target tip height y [mm]", title=f"{reach.mass * 1e3:g} g at the tip")
-    ax.legend(fontsize=8, loc="lower left")
-    ax.grid(alpha=0.3)
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(13, 6.2), sharey=True, layout="constrained")
+    heights, insertion, tension, comp = reach.heights, reach.insertion, reach.tension, reach.compliance
+    ok = reach.reached
+    if top is not None:
+        heights, ok = np.append(heights, top.height), np.append(ok, top.converged)
+        insertion, tension = np.append(insertion, top.insertion), np.append(tension, top.tension)
+        comp = np.append(comp, top.compliance)
+    y_mm = heights * 1e3
+    handles = ax.plot(
+        np.where(ok, insertion * 1e3, np.nan), y_mm, "o-", color="tab:blue", label="stiffest: insertion (bottom axis)"
+    )
     tx = ax.twiny()
-    tx.plot(np.where(reach.reached, reach.tension, np.nan), y_mm, "s--", color="tab:orange", ms=4)
-    tx.set_xlabel("tendon 1 tension [N] (orange)", color="tab:orange")
-    bx.plot(reach.compliance * 1e3, y_mm, "o-", color="tab:blue", label="stiffest (tendon 1 + tube)")
-    bx.plot(reach.tendon_only_compliance * 1e3, y_mm, "s-", color="0.4", label="tendon 1 alone (no tube)")
-    bx.set(xlabel="tip compliance along -y [mm/N]", ylabel="target tip height y [mm]", title="what the tube buys in stiffness")
-    bx.legend(fontsize=8)
-    bx.grid(alpha=0.3)
-    fig.suptitle("Sec. V.A as inverse kinematics: reach a height with the stiffest actuation")
+    handles += tx.plot(np.where(ok, tension, np.nan), y_mm, "s--", color="tab:orange", ms=5, label="stiffest: tension (top axis)")
+    tx.set_xlabel("tendon 1 tension [N]", color="tab:orange")
+    tx.tick_params(axis="x", colors="tab:orange")
+    tx.set_xlim(-0.5, (10.0 if top is None else top.tension_bound) + 0.6)
+    tx.grid(False)
+    handles += bx.plot(comp * 1e3, y_mm, "o-", color="tab:green", label="stiffest: compliance (right)")
+    only = reach.tendon_only_compliance * 1e3
+    handles += bx.plot(only, reach.heights * 1e3, "s-", color="0.3", label="tendon 1 alone ($d$ = 0): compliance")
+    if top is not None:
+        label = f"highest reach: $d$ = {top.insertion * 1e3:.1f} mm at {top.tension:g} N"
+        handles += ax.plot(top.insertion * 1e3, top.height * 1e3, "*", color="red", ms=18, zorder=5, label=label)
+        bx.plot(top.compliance * 1e3, top.height * 1e3, "*", color="red", ms=18, zorder=5)
+    handles.append(ax.axvline(70, color="0.4", ls=":", lw=1.5, label="paper: 70 mm (read off a 10 mm grid)"))
+    ax.set(xlabel="tube insertion $d$ [mm]", ylabel=LABEL["target_height"])
+    bx.set(xlabel=LABEL["compliance_down"], title="what the tube buys in stiffness")
+    bx.tick_params(labelleft=True)
+    fig.legend(handles=handles, loc="outside lower center", ncols=3, fontsize="small")
+    fig.suptitle(f"Sec. V.A: {reach.mass * 1e3:g} g at the tip, each height reached the stiffest way, up to the highest reach")
     return _finish(fig, path)
 
 
+@_styled
 def plot_stiffness_map(stiffness, path: str | Path | None = None):
-    """Tip compliance along -y over in-plane targets: least-tension solution, and how much lower the
-    stiffest (the redundant input chosen for stiffness) is [%]."""
+    """Over in-plane targets (tendons 1 and 3 with the tube): the tip compliance along -y of the
+    least-tension and the stiffest solution (left) and how much lower the stiffest is [%] (right),
+    against the target's height; one colour scale, the insertion the stiffest solution chooses."""
     plt = _pyplot()
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.6), sharey=True)
-    z, y = stiffness.z.ravel() * 1e3, stiffness.y.ravel() * 1e3
-    gain = 100 * (1 - stiffness.stiffest / stiffness.least_tension).ravel()
-    for axis, value, label, cmap in (
-        (ax, stiffness.least_tension.ravel() * 1e3, "least-tension compliance along -y [mm/N]", "magma_r"),
-        (bx, gain, "stiffest: compliance lower by [%]", "viridis"),
-    ):
-        reached = np.isfinite(value)
-        im = axis.scatter(z[reached], y[reached], c=value[reached], cmap=cmap, s=50, edgecolors="none")
-        axis.scatter(z[~reached], y[~reached], marker="x", color="0.5", s=30, label="not reached")
-        fig.colorbar(im, ax=axis, label=label)
-        axis.set(xlabel="target z [mm]")
-        axis.grid(alpha=0.3)
-    ax.set(ylabel="target y [mm]", title="least-tension solution")
-    bx.set(title="stiffest solution against it")
-    if not np.all(np.isfinite(gain)):
-        bx.legend(loc="best", fontsize=8)
-    fig.suptitle("Tendons 1 and 3 with the tube, targets in the z-y plane: where redundancy buys stiffness")
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(13.5, 5.2), sharex=True, layout="constrained")
+    y = stiffness.y.ravel() * 1e3
+    least, stiff = stiffness.least_tension.ravel() * 1e3, stiffness.stiffest.ravel() * 1e3
+    gain = 100 * (1 - stiff / least)
+    depth = stiffness.insertion_stiffest.ravel() * 1e3
+    ok = np.isfinite(gain)
+    scale = dict(c=depth[ok], cmap="viridis", vmin=0.0, vmax=np.nanmax(depth) if ok.any() else 1.0, s=45, zorder=3)
+    ax.scatter(y[ok], least[ok], marker="o", facecolors="none", edgecolors="0.45", s=45, label="least tension")
+    ax.scatter(y[ok], stiff[ok], marker="o", edgecolors="none", label="stiffest", **scale)
+    im = bx.scatter(y[ok], gain[ok], marker="o", edgecolors="none", **scale)
+    ax.set(xlabel=LABEL["target_height"], ylabel=LABEL["compliance_down"], title="compliance of the two choices")
+    bx.set(xlabel=LABEL["target_height"], ylabel="stiffest: compliance lower by [%]", title="what choosing for stiffness buys")
+    ax.legend(loc="best")
+    if not ok.all():
+        bx.text(0.02, 0.02, f"{(~ok).sum()} targets not reached by both", transform=bx.transAxes)
+    fig.colorbar(im, ax=[ax, bx], label="insertion the stiffest solution chooses [mm]", pad=0.02)
+    fig.suptitle("Tendons 1 and 3 with the tube, in-plane targets: what the redundant input buys in stiffness")
     return _finish(fig, path)

@@ -12,6 +12,7 @@ FIGURES = {
     "fig11_compliance_eigenvalues.png",
     "fig13_optimal_insertion.png",
     "fig14_load_capacity.png",
+    "fig16_tip_angle_redundancy.png",
 }
 
 

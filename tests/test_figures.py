@@ -1,0 +1,125 @@
+"""The figures of ``tdct reproduce`` say what they show: drawn from small synthetic results (no
+solves), each is checked for the property a reader relies on (one highest-reach marker, a legend
+entry per curve, equal scales, a legend clear of the data, discrete heights drawn as such, math
+labels); ``STYLE`` is applied while drawing and leaves the global rcParams as they were."""
+
+from types import SimpleNamespace
+
+import matplotlib
+import numpy as np
+
+from tdct_jax import paper, plotting
+
+matplotlib.use("Agg")
+
+
+def _legend_texts(fig):
+    legends = [*fig.legends, *(a.get_legend() for a in fig.axes if a.get_legend() is not None)]
+    return [t.get_text() for legend in legends for t in legend.get_texts()]
+
+
+def _highest_and_reach():
+    heights = np.array([-0.06, -0.04, -0.02, -0.01])
+    reach = paper.StiffestReach(
+        heights=heights,
+        mass=0.05,
+        tension=np.array([0.3, 4.5, 8.4, 10.0]),
+        insertion=np.array([0.16, 0.16, 0.16, 0.139]),
+        compliance=np.array([0.057, 0.067, 0.075, 0.078]),
+        reached=np.ones(4, bool),
+        tendon_only_tension=np.array([6.5, 8.6, np.nan, np.nan]),
+        tendon_only_compliance=np.array([0.109, 0.138, np.nan, np.nan]),
+    )
+    top = paper.HighestReach(
+        height=-5.5e-4,
+        tension=10.0,
+        insertion=0.0642,
+        compliance=0.106,
+        slope_insertion=0.0,
+        slope_tension=8.8e-3,
+        on_bound=True,
+        converged=True,
+        mass=0.05,
+        tension_bound=10.0,
+        grid_tensions=np.array([0.0, 10.0]),
+        grid_insertions=np.array([0.0, 0.16]),
+        grid_height=np.zeros((2, 2)),
+    )
+    return top, reach
+
+
+def test_fig13c_has_one_highest_reach_and_a_legend_entry_per_curve():
+    top, reach = _highest_and_reach()
+    fig = plotting.plot_stiffest_reach(reach, top)
+    texts = _legend_texts(fig)
+    assert sum("highest reach" in t for t in texts) == 1
+    assert any("tension" in t for t in texts) and any("insertion" in t for t in texts)
+    stars = [line for a in fig.axes for line in a.get_lines() if line.get_marker() == "*"]
+    left = [line for line in stars if line.axes is fig.axes[0]]
+    assert len(left) == 1 and np.allclose(left[0].get_xydata(), [[64.2, -0.55]])
+    # every curve ends at the highest reach: the insertion curve's last point is the marker
+    (curve,) = [line for line in fig.axes[0].get_lines() if line.get_marker() == "o"]
+    assert np.allclose(curve.get_xydata()[-1], [64.2, -0.55])
+
+
+def test_fig8b_is_at_equal_scales_with_the_insertion_as_a_band():
+    taus, depths = np.linspace(0, 10, 4), np.linspace(0, 0.15, 3)
+    t, d = np.meshgrid(taus, depths, indexing="ij")
+    tip = np.stack([np.zeros_like(t), 0.01 * t - 0.05 + 0.02 * d, 0.15 - 0.002 * t + 0.01 * d], axis=-1)
+    res = SimpleNamespace(tip_position=tip, axes={"tensions": np.outer(taus, [1.0, 0, 0, 0]), "insertion": depths})
+    fig = plotting.plot_fig8b(res)
+    (ax,) = fig.axes
+    assert ax.get_aspect() == 1.0
+    assert len(ax.collections) == 1 and len(ax.collections[0].get_paths()) == 3 * 2  # one cell per grid cell
+    assert not any(line.get_linestyle() == "--" for line in ax.get_lines())
+    assert "$z_{\\mathrm{tip}}$" in ax.get_xlabel() and "$y_{\\mathrm{tip}}$" in ax.get_ylabel()
+
+
+def test_fig10_legend_sits_inside_the_innermost_ellipse_and_says_what_is_left_out():
+    CMs = {f"{d} mm": np.diag([1e-3, s, 1.1 * s]) for d, s in ((0, 0.2), (50, 0.12), (150, 0.085))}
+    fig = plotting.plot_compliance_ellipses(CMs, legend_title="insertion $d$")
+    fig.canvas.draw()
+    (ax,) = fig.axes
+    box = ax.get_legend().get_window_extent().transformed(ax.transData.inverted())
+    a, b = 1.1 * 85, 85  # the innermost ellipse's semi-axes [mm/N]
+    corners = [(x, y) for x in (box.x0, box.x1) for y in (box.y0, box.y1)]
+    assert all((x / a) ** 2 + (y / b) ** 2 < 1 for x, y in corners)
+    assert any("\\lambda_1" in t.get_text() and "left out" in t.get_text() for t in fig.texts)
+
+
+def test_fig16_draws_the_heights_as_discrete_and_shares_the_angle_axis():
+    heights, depths = np.array([0.0, 0.02, 0.04]), np.linspace(0, 0.16, 5)
+    angle = np.radians(10 + 20 * heights[:, None] / 0.02 + np.sin(depths)[None, :] * 30)
+    family = paper.AngleFamily(heights, depths, angle, np.ones_like(angle), np.ones_like(angle, bool))
+    fig = plotting.plot_tip_angle_family(family)
+    ax, bx = fig.axes
+    assert ax.get_ylim() == bx.get_ylim()
+    assert not bx.collections  # no filled band between the heights
+    assert np.allclose(bx.get_xticks(), heights * 1e3)
+    assert "$\\theta_{\\mathrm{tip}}$" in ax.get_ylabel()
+
+
+def test_stiffness_map_is_against_height_with_one_colour_scale():
+    y = np.linspace(-0.04, 0.05, 12).reshape(3, 4)
+    m = paper.StiffnessMap(
+        tensions=np.arange(3.0),
+        insertions=np.arange(4.0),
+        z=0.15 + 0 * y,
+        y=y,
+        least_tension=np.full((3, 4), 0.18),
+        stiffest=np.full((3, 4), 0.08),
+        insertion_least_tension=np.zeros((3, 4)),
+        insertion_stiffest=np.full((3, 4), 0.16),
+    )
+    fig = plotting.plot_stiffness_map(m)
+    colourbars = [a for a in fig.axes if a.get_label() == "<colorbar>"]
+    assert len(colourbars) == 1
+    assert all("target tip height" in a.get_xlabel() for a in fig.axes if a not in colourbars)
+
+
+def test_style_is_applied_while_drawing_and_left_behind():
+    before = matplotlib.rcParams["font.size"]
+    fig = plotting.plot_fig11((0.0, 6.0), (0.0, 0.15), np.ones((2, 2, 3)) * 1e-3)
+    assert fig.axes[0].xaxis.label.get_fontsize() == plotting.STYLE["axes.labelsize"]
+    assert [a.get_ylabel() for a in fig.axes] == [f"$\\lambda_{k}$ [mm/N]" for k in (1, 2, 3)]
+    assert matplotlib.rcParams["font.size"] == before
