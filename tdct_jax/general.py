@@ -272,8 +272,12 @@ def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solv
 def node_quantities(robot: GeneralRobot, act, load, gravity, nodes, pl: Plan):
     """Flattened node arc lengths, States, strains v, u and rod force n, m, each node by its own
     interval's segment parameters."""
-    (ys, s), P = nodes, pl.intervals
-    K, m = s.shape
+    (ys, _), P = nodes, pl.intervals
+    K, m = pl.b.size - 1, jnp.shape(ys.p)[1]
+    # node arc lengths on the exact grid (the ones carried in the state differ in the last bit),
+    # each interval's last node exactly at its breakpoint
+    frac = (jnp.arange(m) / (m - 1))[None, :]
+    s = jnp.where(frac < 1, pl.b[:-1, None] + (pl.b[1:] - pl.b[:-1])[:, None] * frac, pl.b[1:, None])
     flat = jax.tree.map(lambda a: a.reshape(K * m, *a.shape[2:]), ys)
     P_nodes = jax.tree.map(lambda a: jnp.repeat(a, m, axis=0), P)
 
