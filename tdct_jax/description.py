@@ -77,13 +77,14 @@ class Tendon:
     """One tendon: its routing in the body frame, where it is anchored, its limits.
 
     The tendon passes through the cross-section at r_t(s) = offset (cos a(s), sin a(s), 0) with
-    a(s) = angle + twist s (straight for twist 0, helical otherwise) and carries its tension from
+    a(s) = angle + twist s (straight without a twist) and carries its tension from
     the base to the anchor, where it pulls the body back along its own tangent.
 
     Attributes:
         offset: distance from the axis [m].
         angle: angle about +z from body +x at the base [rad] (the file gives ``angle_deg``).
-        twist: helical twist rate [rad/m] (the file gives ``twist_deg_per_m``); 0 for straight.
+        twist: helical twist rate [rad/m] (the file gives ``twist_deg_per_m``); None (default):
+            straight, and the solver skips the helical terms unless some tendon is helical.
         end: arc length of the anchor [m], in (0, L]; None (default): the tip, and no breakpoint.
         max_tension: highest allowed tension [N]; None: unbounded.
         stiffness: axial stiffness EA [N] (displacement control); None: inextensible.
@@ -91,14 +92,14 @@ class Tendon:
 
     offset: float
     angle: float
-    twist: float = 0.0
+    twist: float | None = None
     end: float | None = None
     max_tension: float | None = None
     stiffness: float | None = None
 
     def __post_init__(self):
         units = dict(offset=" m", angle=" rad", twist=" rad/m", end=" m", max_tension=" N", stiffness=" N")
-        _scalars(self, units, optional=("end", "max_tension", "stiffness"))
+        _scalars(self, units, optional=("twist", "end", "max_tension", "stiffness"))
         check_range("Tendon.offset", self.offset, 0.0, unit=" m")
         for name, unit in (("end", " m"), ("max_tension", " N"), ("stiffness", " N")):
             if getattr(self, name) is not None:
@@ -106,10 +107,11 @@ class Tendon:
 
     def position(self, s):
         """r_t(s) and its derivative r_t'(s), body frame [m] and [1], each (..., 3)."""
-        a = self.angle + self.twist * s
+        twist = 0.0 if self.twist is None else self.twist
+        a = self.angle + twist * s
         c, sn = jnp.cos(a), jnp.sin(a)
         r = self.offset * jnp.stack([c, sn, jnp.zeros_like(c)], axis=-1)
-        dr = (self.offset * self.twist) * jnp.stack([-sn, c, jnp.zeros_like(c)], axis=-1)
+        dr = (self.offset * twist) * jnp.stack([-sn, c, jnp.zeros_like(c)], axis=-1)
         return r, dr
 
 

@@ -19,7 +19,9 @@ F = m g) give N(s_p+) = N(s_p-) - F, M(s_p+) = M(s_p-) - C, applied at the start
 that begins at s_p (or, at s_p = L, before the tip condition N(L) = F_e, M(L) = M_e).
 
 Helical tendons: r_t(s) turns with the twist rate, so the tendon tangent is pb_t = u x r_t + r_t' + v;
-s rides in the state (s' = 1) so that every RK4 stage sees its own r_t(s).
+s rides in the state (s' = 1) so that every RK4 stage sees its own r_t(s). Where no tendon has a
+twist (``Tendon.twist`` None, static) r_t is constant and s is not carried: the paper's robot
+through this path then costs what it costs through ``Robot``'s.
 
 The intervals are what multiple shooting will use: ``plan`` gives each one's ends and parameters.
 """
@@ -66,13 +68,26 @@ class Plan(NamedTuple):
 
 def _tendon_fields(robot: GeneralRobot):
     """Stacked tendon routing: offsets, base angles, twist rates, (n_t,) each."""
-    stack = [jnp.stack([jnp.asarray(getattr(t, k), float) for t in robot.tendons]) for k in ("offset", "angle", "twist")]
-    return stack if robot.tendons else [jnp.zeros(0)] * 3
+    if not robot.tendons:
+        return [jnp.zeros(0)] * 3
+    twist = [0.0 if t.twist is None else t.twist for t in robot.tendons]
+    return [jnp.stack([jnp.asarray(getattr(t, k), float) for t in robot.tendons]) for k in ("offset", "angle")] + [
+        jnp.stack([jnp.asarray(x, float) for x in twist])
+    ]
+
+
+def is_helical(robot: GeneralRobot) -> bool:
+    """Some tendon has a twist rate (static): r_t depends on s."""
+    return any(t.twist is not None for t in robot.tendons)
 
 
 def tendon_positions(robot: GeneralRobot, s):
-    """r_t(s) and r_t'(s) of every tendon, body frame, (n_t, 3) each (Tendon.position)."""
+    """r_t(s) and r_t'(s) of every tendon, body frame, (n_t, 3) each (Tendon.position); r_t' is
+    None for a robot without helical tendons."""
     offset, angle, twist = _tendon_fields(robot)
+    if not is_helical(robot):
+        a = angle
+        return offset[:, None] * jnp.stack([jnp.cos(a), jnp.sin(a), jnp.zeros_like(a)], axis=-1), None
     a = angle + twist * s
     c, sn = jnp.cos(a), jnp.sin(a)
     r = offset[:, None] * jnp.stack([c, sn, jnp.zeros_like(a)], axis=-1)
@@ -242,25 +257,33 @@ def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solv
     L, n = robot.length, solver.steps
     f_d = load.distributed_force
 
+    helical = is_helical(robot)
+    r_fixed = None if helical else tendon_positions(robot, 0.0)[0]
+
     def field(P: Interval):
         def f(_, ys):
-            y, s = ys
-            v, u = strains(_segment(robot, P, s), y.R, y.N, y.M)
+            y, s = ys if helical else (ys, None)
+            seg = _segment(robot, P, s) if helical else Segment(P.K_se, P.K_bt, P.rho, P.tau, r_fixed, P.backbone)
+            v, u = strains(seg, y.R, y.N, y.M)
             dp = y.R @ v
-            return State(dp, y.R @ hat(u), -P.rho * gravity - f_d, -jnp.cross(dp, y.N)), jnp.ones_like(s)
+            dy = State(dp, y.R @ hat(u), -P.rho * gravity - f_d, -jnp.cross(dp, y.N))
+            return (dy, jnp.ones_like(s)) if helical else dy
 
         return f
 
     def project(ys):
+        if not helical:
+            return ys._replace(R=orthonormalize(ys.R))
         y, s = ys
         return y._replace(R=orthonormalize(y.R)), s
 
     def interval(y, k):
         P, b0, b1, dN, dM = k
         y = y._replace(N=y.N + dN, M=y.M + dM)
-        out = rk4(field(P), (y, b0), jnp.full(n, (b1 - b0) / n), None, project, path)
-        (y_end, _), nodes = out if path else (out, None)
-        return y_end, nodes
+        start = (y, b0) if helical else y
+        out = rk4(field(P), start, jnp.full(n, (b1 - b0) / n), None, project, path)
+        end, nodes = out if path else (out, None)
+        return (end[0] if helical else end), (nodes[0] if helical and path else nodes)
 
     y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:] * F_c * L)
     y_L, nodes = lax.scan(interval, y0, (pl.intervals, pl.b[:-1], pl.b[1:], pl.dN[:-1], pl.dM[:-1]))
@@ -272,7 +295,7 @@ def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solv
 def node_quantities(robot: GeneralRobot, act, load, gravity, nodes, pl: Plan):
     """Flattened node arc lengths, States, strains v, u and rod force n, m, each node by its own
     interval's segment parameters."""
-    (ys, _), P = nodes, pl.intervals
+    ys, P = nodes, pl.intervals
     K, m = pl.b.size - 1, jnp.shape(ys.p)[1]
     # node arc lengths on the exact grid (the ones carried in the state differ in the last bit),
     # each interval's last node exactly at its breakpoint
