@@ -357,8 +357,10 @@ def hat(x):
 def rucker_webster_tip(L, D, E, nu, density, tendons, gravity, tip_force):
     """Independent reference, numpy/scipy only: Rucker and Webster (2011), general tendon routing,
     the rod's own strains (v, u) as state with eq. 1's linear system for (v', u'), DOP853, shooting
-    on the rod's base force and moment with scipy's hybr. Straight tendons (offset, angle [rad],
-    anchor, tension); a solid round backbone; gravity and a tip force.
+    on the rod's base force and moment with scipy's hybr. Tendons (offset, angle [rad], anchor,
+    tension, twist [rad/m]) at r(s) = offset (cos(angle + twist s), sin(...), 0), so that
+    pb = u x r + v + r' and a = A (u x pb + u x r' + r''); a solid round backbone; gravity and a
+    tip force.
 
     At an anchor inside the body the rod takes the ending tendons' pull tau R t (n(s+) = n(s-) +
     tau R t) and, for every tendon that passes on, the kink its tangent makes where the curvature
@@ -370,26 +372,38 @@ def rucker_webster_tip(L, D, E, nu, density, tendons, gravity, tip_force):
     Gm = E / (2 * (1 + nu))
     Kse, Kbt = np.diag([Gm * A, Gm * A, E * A]), np.diag([E * I, E * I, Gm * 2 * I])
     f = density * A * np.asarray(gravity, float)
-    tend = [(off * np.array([np.cos(a), np.sin(a), 0.0]), s_a, tau) for off, a, s_a, tau in tendons]
+
+    def routing(off, a0, k):
+        """s -> (r, r', r''), body frame."""
+
+        def route(s):
+            c, sn = np.cos(a0 + k * s), np.sin(a0 + k * s)
+            return off * np.array([c, sn, 0.0]), off * k * np.array([-sn, c, 0.0]), -off * k**2 * np.array([c, sn, 0.0])
+
+        return route
+
+    tend = [(routing(t[0], t[1], t[4] if len(t) > 4 else 0.0), t[2], t[3]) for t in tendons]
     cuts = sorted({s_a for _, s_a, _ in tend} | {L})
 
-    def rhs(_, y, active):
+    def rhs(s, y, active):
         R, v, u = y[3:12].reshape(3, 3), y[12:15], y[15:18]
         Am, Bm, Gmat, Hm, a, b = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros(3), np.zeros(3)
-        for r, tau in active:
-            pb = np.cross(u, r) + v
+        for route, tau in active:
+            r, dr, ddr = route(s)
+            pb = np.cross(u, r) + v + dr
             At = -tau * hat(pb) @ hat(pb) / np.linalg.norm(pb) ** 3
-            Bt, at = hat(r) @ At, At @ np.cross(u, pb)
+            Bt, at = hat(r) @ At, At @ (np.cross(u, pb) + np.cross(u, dr) + ddr)
             Am, Bm, Gmat, Hm, a, b = Am + At, Bm + Bt, Gmat - At @ hat(r), Hm - Bt @ hat(r), a + at, b + hat(r) @ at
         c = -np.cross(u, Kbt @ u) - np.cross(v, Kse @ (v - e3)) - b
         d = -np.cross(u, Kse @ (v - e3)) - R.T @ f - a
         w = np.linalg.solve(np.block([[Kse + Am, Gmat], [Bm, Kbt + Hm]]), np.concatenate([d, c]))
         return np.concatenate([R @ v, (R @ hat(u)).ravel(), w])
 
-    def pull(R, v, u, group):
+    def pull(s, R, v, u, group):
         F, C = np.zeros(3), np.zeros(3)
-        for r, tau in group:
-            pb = np.cross(u, r) + v
+        for route, tau in group:
+            r, dr, _ = route(s)
+            pb = np.cross(u, r) + v + dr
             Ft = -tau * R @ pb / np.linalg.norm(pb)
             F, C = F + Ft, C + np.cross(R @ r, Ft)
         return F, C
@@ -403,20 +417,20 @@ def rucker_webster_tip(L, D, E, nu, density, tendons, gravity, tip_force):
             y = solve_ivp(rhs, (s0, s1), y, args=(active,), method="DOP853", rtol=1e-11, atol=1e-14).y[:, -1]
             R, v, u = y[3:12].reshape(3, 3), y[12:15], y[15:18]
             n, m = R @ Kse @ (v - e3), R @ Kbt @ u
-            F, C = pull(R, v, u, [(r, tau) for r, s_a, tau in tend if s_a == s1])
+            F, C = pull(s1, R, v, u, [(r, tau) for r, s_a, tau in tend if s_a == s1])
             if s1 == L:
                 return y, np.concatenate([n - (tip_force + F), (m - C) / L])
             passing = [(r, tau) for r, s_a, tau in tend if s_a > s1]
-            Fp, Cp = pull(R, v, u, passing)
+            Fp, Cp = pull(s1, R, v, u, passing)
 
-            def after(w, R=R, n=n, m=m, F=F, C=C, Fp=Fp, Cp=Cp, passing=passing):
-                Fq, Cq = pull(R, w[:3], w[3:], passing)
+            def after(w, s1=s1, R=R, n=n, m=m, F=F, C=C, Fp=Fp, Cp=Cp, passing=passing):
+                Fq, Cq = pull(s1, R, w[:3], w[3:], passing)
                 return np.concatenate([Kse @ (w[:3] - e3) - R.T @ (n - F + Fq - Fp), Kbt @ w[3:] - R.T @ (m - C + Cq - Cp)])
 
             y = np.concatenate([y[:12], fsolve(after, np.concatenate([v, u]), xtol=1e-13)])
             s0 = s1
 
-    x0 = -sum(np.concatenate([tau * e3, tau * np.cross(r, e3) / L]) for r, _, tau in tend)
+    x0 = -sum(np.concatenate([tau * e3, tau * np.cross(route(0.0)[0], e3) / L]) for route, _, tau in tend)
     sol = root(lambda x: integrate(x)[1], x0, method="hybr", options=dict(xtol=1e-13))
     y, res = integrate(sol.x)
     assert np.max(np.abs(res)) < 1e-9, res
@@ -437,3 +451,22 @@ def test_two_segment_robot_matches_an_independent_implementation():
     reference = rucker_webster_tip(0.4, 1.4e-3, 54e9, 0.3, 6450.0, tendons, G, TWO_TIP_FORCE)
     np.testing.assert_allclose(sol.tip_position, reference, rtol=0, atol=INDEPENDENT_ATOL)
     assert np.max(np.abs(np.asarray(sol.tip_position) - reference)) < 1e-8  # measured 3e-10 m
+
+
+HELIX = np.radians(90.0)  # rad/m
+
+
+def test_helical_tendons_match_the_independent_implementation():
+    """Segment 2's tendons wound helically, 90 deg per metre (36 deg over the robot): the tendon
+    tangent gains r_t' and the distributed load u x r_t' + r_t''."""
+    robot = two_segment(0.0)
+    tendons = tuple(dataclasses.replace(t, twist=HELIX) if i >= 3 else t for i, t in enumerate(robot.tendons))
+    robot = dataclasses.replace(robot, tendons=tendons)
+    sol = tdct.solve(robot, tdct.GeneralActuation(TWO_TENSIONS), tdct.Loads(tip_force=TWO_TIP_FORCE), gravity=G)
+    angles = np.radians([90, -30, 210, 150, 30, 270])
+    anchors = [0.2] * 3 + [0.4] * 3
+    twists = [0.0] * 3 + [HELIX] * 3
+    tendons = [(0.01, a, e, t, k) for a, e, t, k in zip(angles, anchors, TWO_TENSIONS, twists, strict=True)]
+    reference = rucker_webster_tip(0.4, 1.4e-3, 54e9, 0.3, 6450.0, tendons, G, TWO_TIP_FORCE)
+    np.testing.assert_allclose(sol.tip_position, reference, rtol=0, atol=INDEPENDENT_ATOL)
+    assert np.max(np.abs(np.asarray(sol.tip_position) - reference)) < 1e-8
