@@ -239,6 +239,16 @@ def test_point_force_on_a_cantilever_matches_beam_theory():
     assert float(-sol.tip_position[1]) == pytest.approx(expected, rel=1e-6)
 
 
+def test_distributed_force_on_a_cantilever_matches_beam_theory():
+    w = 1e-5  # N/m, along -y: tip deflection ~ 4e-5 L
+    load = tdct.Loads(point_s=[MID], point_force=[[0.0, 0.0, 0.0]], distributed_force=[0.0, -w, 0.0])
+    sol = tdct.solve(rod(), tdct.GeneralActuation([0.0]), load, gravity=G)
+    GA, _, EI = rod_stiffness()
+    expected = w * ROD_L**4 / (8 * EI) + w * ROD_L**2 / (2 * GA)
+    assert float(-sol.tip_position[1]) == pytest.approx(expected, rel=1e-6)
+    np.testing.assert_allclose(sol.total_force[0], [0.0, -w * ROD_L, 0.0], rtol=0, atol=1e-18)
+
+
 def test_point_mass_gives_the_shape_of_the_equal_point_force():
     m = 2e-3
     act = tdct.GeneralActuation([0.3])
