@@ -52,6 +52,7 @@ from .results import SweepResult as SweepResult  # noqa: E402
 from .results import gather as gather  # noqa: E402
 from .robot import CalibrationWarning as CalibrationWarning  # noqa: E402
 from .robot import Robot as Robot  # noqa: E402
+from .solve import GeneralSolution as GeneralSolution  # noqa: E402
 from .solve import Solution as Solution  # noqa: E402
 from .solve import solve as solve  # noqa: E402
 from .solve import tip_angle as tip_angle  # noqa: E402

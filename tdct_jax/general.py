@@ -47,13 +47,14 @@ class Interval(NamedTuple):
     """Segment parameters of one interval (a leading axis over intervals in ``Plan``).
 
     K_se (3,) [N], K_bt (3,) [N m^2], rho [kg/m], backbone (1.0: a tube inside), tau (n_t,) [N]
-    (zero beyond each anchor)."""
+    (zero beyond each anchor), present (n_t,) (1.0 before each anchor)."""
 
     K_se: jax.Array
     K_bt: jax.Array
     rho: jax.Array
     backbone: jax.Array
     tau: jax.Array
+    present: jax.Array
 
 
 class Plan(NamedTuple):
@@ -137,7 +138,7 @@ def interval_parameters(robot: GeneralRobot, act: GeneralActuation, k, rank: Ran
     else:
         EI = rho_t = backbone = jnp.zeros(())
     tau = jnp.where(present, jnp.asarray(act.tensions, float), 0.0)
-    return Interval(p[:3], jnp.stack([p[3] + EI, p[4] + EI, p[5]]), p[6] + rho_t, backbone, tau)
+    return Interval(p[:3], jnp.stack([p[3] + EI, p[4] + EI, p[5]]), p[6] + rho_t, backbone, tau, present.astype(float))
 
 
 class Ranks(NamedTuple):
@@ -237,7 +238,8 @@ def straight_rod(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravit
     N0 = N0 + jnp.sum(load.point_force, 0) + load.distributed_force * L
     arms = s_p[:, None] * E3[None]
     M0 = M0 + jnp.sum(load.point_moment + jnp.cross(arms, load.point_force), 0) + jnp.cross(E3, load.distributed_force) * L**2 / 2
-    return jnp.concatenate([N0 / F_c, M0 / (F_c * L)])
+    guesses = jnp.asarray(act.tensions, float)[np.asarray(act.driven, int)]  # the driven tendons' given tensions
+    return jnp.concatenate([N0 / F_c, M0 / (F_c * L), guesses / F_c])
 
 
 def _segment(robot: GeneralRobot, P: Interval, s) -> Segment:
@@ -245,57 +247,104 @@ def _segment(robot: GeneralRobot, P: Interval, s) -> Segment:
     return Segment(P.K_se, P.K_bt, P.rho, P.tau, r, P.backbone, True, dr)
 
 
+class Carry(NamedTuple):
+    """What RK4 integrates: the State, and where needed the arc length s (helical tendons) and
+    each tendon's length from the base, l (n_t,) (displacements); None where not needed."""
+
+    y: State
+    s: jax.Array | None = None
+    l: jax.Array | None = None
+
+
+def rest_lengths(robot: GeneralRobot):
+    """Each tendon's length from the base to its anchor in the straight, unloaded robot [m], (n_t,)."""
+    offset, _, twist = _tendon_fields(robot)
+    return _anchors(robot) * jnp.sqrt(1 + (offset * twist) ** 2)
+
+
+def displacements(robot: GeneralRobot, act: GeneralActuation, lengths):
+    """What each tendon's encoder reads [m]: its rest length inside the robot less its present
+    rest length there, l / (1 + tau / EA) (l: its length along the shape), (n_t,)."""
+    EA = [jnp.inf if t.stiffness is None else t.stiffness for t in robot.tendons]
+    stretch = 1 + jnp.asarray(act.tensions, float) / jnp.stack([jnp.asarray(x, float) for x in EA]) if robot.tendons else 1.0
+    return rest_lengths(robot) - lengths / stretch
+
+
+def with_driven(act: GeneralActuation, x, F_c) -> GeneralActuation:
+    """The actuation with the displacement-driven tendons' tensions taken from the unknowns x[6:]."""
+    if not act.driven:
+        return act
+    tensions = jnp.asarray(act.tensions, float).at[np.asarray(act.driven)].set(x[6:] * F_c)
+    return GeneralActuation._rebuild(tensions, act.insertions, act.displacements, act.driven)
+
+
 def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solver, x, F_c, path: bool = False):
-    """Integrates every interval from the scaled base unknowns x (N(0), M(0)) to the tip.
+    """Integrates every interval from the scaled unknowns x to the tip: x[:6] the base wrench
+    (N(0), M(0)), x[6:] the tensions of the displacement-driven tendons (act.driven) over F_c.
 
     Returns:
-        The scaled tip residual (6,) and the tip State (with ``path``: the States and arc lengths
-        at every interval's steps + 1 nodes, shapes (K, steps + 1, ...): both sides of each
-        breakpoint appear, the node at an interval's start after that breakpoint's jump).
+        The scaled residual: tip (6,), then per driven tendon phi(tau / F_c, (delta_shape -
+        delta) / L) with Fischer and Burmeister's phi(a, b) = a + b - |(a, b)|, zero where the
+        tendon is taut at its commanded displacement delta (b = 0, a >= 0) or slack (tau = 0, the
+        shape asking for more than was pulled: b > 0); and the tip State (with ``path``: the Carry
+        at every interval's steps + 1 nodes, shapes (K, steps + 1, ...), both sides of each
+        breakpoint, the node at an interval's start after that breakpoint's jump; and the plan).
     """
+    act = with_driven(act, x, F_c)
     pl = plan(robot, act, load, gravity)
     L, n = robot.length, solver.steps
     f_d = load.distributed_force
-
-    helical = is_helical(robot)
+    helical, lengths = is_helical(robot), bool(act.driven) or path
     r_fixed = None if helical else tendon_positions(robot, 0.0)[0]
 
     def field(P: Interval):
-        def f(_, ys):
-            y, s = ys if helical else (ys, None)
-            seg = _segment(robot, P, s) if helical else Segment(P.K_se, P.K_bt, P.rho, P.tau, r_fixed, P.backbone)
+        def f(_, c: Carry) -> Carry:
+            y = c.y
+            seg = _segment(robot, P, c.s) if helical else Segment(P.K_se, P.K_bt, P.rho, P.tau, r_fixed, P.backbone)
             v, u = strains(seg, y.R, y.N, y.M)
             dp = y.R @ v
             dy = State(dp, y.R @ hat(u), -P.rho * gravity - f_d, -jnp.cross(dp, y.N))
-            return (dy, jnp.ones_like(s)) if helical else dy
+            dl = None
+            if lengths:
+                pb = jnp.cross(u[None], seg.r) + v[None] + (0.0 if seg.dr is None else seg.dr)
+                dl = P.present * jnp.linalg.norm(pb, axis=-1)
+            return Carry(dy, None if c.s is None else jnp.ones_like(c.s), dl)
 
         return f
 
-    def project(ys):
-        if not helical:
-            return ys._replace(R=orthonormalize(ys.R))
-        y, s = ys
-        return y._replace(R=orthonormalize(y.R)), s
+    def project(c: Carry) -> Carry:
+        return c._replace(y=c.y._replace(R=orthonormalize(c.y.R)))
 
-    def interval(y, k):
+    def interval(c: Carry, k):
         P, b0, b1, dN, dM = k
-        y = y._replace(N=y.N + dN, M=y.M + dM)
-        start = (y, b0) if helical else y
-        out = rk4(field(P), start, jnp.full(n, (b1 - b0) / n), None, project, path)
+        y = c.y._replace(N=c.y.N + dN, M=c.y.M + dM)
+        out = rk4(field(P), Carry(y, b0 if helical else None, c.l), jnp.full(n, (b1 - b0) / n), None, project, path)
         end, nodes = out if path else (out, None)
-        return (end[0] if helical else end), (nodes[0] if helical and path else nodes)
+        return end._replace(s=None), nodes
 
-    y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:] * F_c * L)
-    y_L, nodes = lax.scan(interval, y0, (pl.intervals, pl.b[:-1], pl.b[1:], pl.dN[:-1], pl.dM[:-1]))
-    N_L, M_L = y_L.N + pl.dN[-1], y_L.M + pl.dM[-1]
-    res = jnp.concatenate([(N_L - load.tip_force) / F_c, (M_L - load.tip_moment) / (F_c * L)])
-    return (res, (nodes, pl)) if path else (res, y_L)
+    y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:6] * F_c * L)
+    end, nodes = lax.scan(
+        interval,
+        Carry(y0, None, jnp.zeros(robot.n_tendons) if lengths else None),
+        (pl.intervals, pl.b[:-1], pl.b[1:], pl.dN[:-1], pl.dM[:-1]),
+    )
+    N_L, M_L = end.y.N + pl.dN[-1], end.y.M + pl.dM[-1]
+    res = [(N_L - load.tip_force) / F_c, (M_L - load.tip_moment) / (F_c * L)]
+    slack = jnp.zeros(robot.n_tendons, bool)
+    if act.driven:
+        i = np.asarray(act.driven)
+        gap = displacements(robot, act, end.l)[i] - act.displacements
+        a, b = act.tensions[i] / F_c, gap / L
+        res.append(a + b - jnp.sqrt(a**2 + b**2))  # Fischer-Burmeister: zero iff a, b >= 0 and a b = 0
+        slack = slack.at[i].set(b > a)
+    res = jnp.concatenate(res)
+    return (res, (nodes, pl, act, end.l, slack)) if path else (res, end.y)
 
 
 def node_quantities(robot: GeneralRobot, act, load, gravity, nodes, pl: Plan):
     """Flattened node arc lengths, States, strains v, u and rod force n, m, each node by its own
     interval's segment parameters."""
-    ys, P = nodes, pl.intervals
+    ys, P = nodes.y, pl.intervals
     K, m = pl.b.size - 1, jnp.shape(ys.p)[1]
     # node arc lengths on the exact grid (the ones carried in the state differ in the last bit),
     # each interval's last node exactly at its breakpoint
@@ -322,6 +371,8 @@ def check_arguments(robot: GeneralRobot, act: GeneralActuation, load: Loads, sol
             "with the 'balanced' transition and the 'exact' tendon model only (the paper's variants: tdct.Robot)"
         )
     n_t, n_tubes = robot.n_tendons, robot.n_tubes
+    if any(i >= n_t for i in act.driven):
+        raise ValueError(f"driven = {act.driven}: the robot has {n_t} tendons, indices 0 to {n_t - 1}")
     if tuple(jnp.shape(act.tensions)) != (n_t,):
         raise ValueError(f"tensions has shape {jnp.shape(act.tensions)}: the robot has {n_t} tendons, one tension each")
     if tuple(jnp.shape(act.insertions)) != (n_tubes,):

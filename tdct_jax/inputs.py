@@ -12,24 +12,43 @@ import numpy as np
 
 from .checks import as_array, check_range, is_concrete
 from .loads import Actuation, TipLoad
-from .tree import pytree, set_fields
+from .tree import pytree, set_fields, static
 
 
 @pytree
 class GeneralActuation:
-    """Joint-space inputs of a GeneralRobot (one configuration).
+    """Joint-space inputs of a GeneralRobot (one configuration): each tendon driven by its tension
+    or, for those listed in ``driven``, by its displacement (the length pulled at the base, what
+    its encoder reads); mixed control is allowed.
 
     Attributes:
-        tensions: tension of each tendon [N], shape (n_tendons,), in the robot's tendon order.
+        tensions: tension of each tendon [N], shape (n_tendons,), in the robot's tendon order;
+            for a displacement-driven tendon, the start of the search (0 is fine).
         insertions: depth of each tube from the base [m], shape (n_tubes,), in [0, L].
+        displacements: the commanded displacement of each driven tendon [m], shape (len(driven),):
+            its rest length inside the straight robot less its present rest length there (so
+            positive when pulled). Its tension is found so that the shape matches; where that
+            would take a negative tension the tendon goes slack (tension exactly 0,
+            ``GeneralSolution.slack``).
+        driven: indices of the displacement-driven tendons (static).
     """
 
     tensions: object = ()
     insertions: object = ()
+    displacements: object = ()
+    driven: tuple = static(default=())
 
     def __post_init__(self):
         tensions = as_array("tensions", self.tensions, (np.size(self.tensions),) if is_concrete(self.tensions) else None)
         check_range("tensions", tensions, 0.0, unit=" N")
+        driven = tuple(int(i) for i in self.driven)
+        if len(set(driven)) != len(driven) or any(i < 0 for i in driven):
+            raise ValueError(f"driven = {self.driven!r}: distinct tendon indices (0 for the first tendon) expected")
+        k = len(driven)
+        displacements = as_array(
+            "displacements", self.displacements, (k,) if is_concrete(self.displacements) else None, unit=" m"
+        )
+        set_fields(self, driven=driven, displacements=displacements)
         insertions = as_array(
             "insertions", self.insertions, (np.size(self.insertions),) if is_concrete(self.insertions) else None
         )
@@ -53,6 +72,18 @@ class GeneralActuation:
                 f"a tdct.Actuation carries one insertion, the robot has {n_tubes} tubes: use tdct.GeneralActuation(tensions, insertions)"
             )
         raise TypeError(f"act must be a tdct.GeneralActuation or tdct.Actuation, got {type(act).__name__}")
+
+    @classmethod
+    def _rebuild(cls, tensions, insertions, displacements, driven) -> GeneralActuation:
+        """Built without the checks (inside the solver, from traced values)."""
+        out = object.__new__(cls)
+        for name, value in dict(tensions=tensions, insertions=insertions, displacements=displacements, driven=driven).items():
+            object.__setattr__(out, name, value)
+        return out
+
+    def scaled(self, lam) -> GeneralActuation:
+        """Tensions and displacements times lam (the solver's load continuation)."""
+        return self._rebuild(lam * self.tensions, self.insertions, lam * self.displacements, self.driven)
 
 
 @pytree

@@ -138,10 +138,11 @@ def root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: So
     """
     F_c = force_scale(robot, act, load, gravity)
     x_straight = straight_rod(robot, act, load, gravity, F_c)
-    x0 = jnp.where(jnp.all(jnp.isfinite(guess)), scaled(robot, guess, F_c), x_straight)
+    start = jnp.concatenate([scaled(robot, guess, F_c), x_straight[6:]])  # x_straight[6:]: driven tensions
+    x0 = jnp.where(jnp.all(jnp.isfinite(guess)), start, x_straight)
 
     def F_at(lam):
-        act_lam = dataclasses.replace(act, tensions=lam * act.tensions)
+        act_lam = act.scaled(lam) if isinstance(robot, GeneralRobot) else dataclasses.replace(act, tensions=lam * act.tensions)
         load_lam = TipLoad(lam * load.force, lam * load.moment) if isinstance(load, TipLoad) else load.scaled(lam)
 
         def F(x):
@@ -221,8 +222,13 @@ def _jacobian_at_root_jvp(primals, tangents):
 def tip_compliance(robot: Robot, R_tip, J_res, J_p, J_R, F_c):
     """The 6x6 tip compliance d(tip position, tip rotation vector) / d(F_e, M_e) (eq. 41) from the
     Jacobians of the residual and of the tip pose (p, R) with respect to the scaled unknowns at
-    the root: the tip load enters only the residual, d res / d(F_e, M_e) = -diag(1 / F_c, 1 / (F_c L))."""
-    dx_dw = jnp.linalg.solve(J_res, jnp.diag(jnp.repeat(jnp.stack([1 / F_c, 1 / (F_c * robot.length)]), 3)))
+    the root: the tip load enters only the residual, d res / d(F_e, M_e) = -diag(1 / F_c, 1 / (F_c L)).
+    With displacement-driven tendons the displacements are held: their tensions adjust."""
+    dres_dw = jnp.diag(jnp.repeat(jnp.stack([1 / F_c, 1 / (F_c * robot.length)]), 3))
+    # unknowns beyond the base wrench (displacement-driven tensions): their residuals hold the
+    # displacements, which the tip load does not enter
+    dres_dw = jnp.concatenate([dres_dw, jnp.zeros((J_res.shape[0] - 6, 6))])
+    dx_dw = jnp.linalg.solve(J_res, dres_dw)
     return jnp.concatenate([J_p @ dx_dw, rotation_columns(J_R @ dx_dw, R_tip)])
 
 

@@ -110,8 +110,39 @@ def solution_at(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: So
 def _assemble_general(robot, act, load, gravity, ys, res, info) -> Solution:
     """Solution of a GeneralRobot: nodes interval by interval, steps + 1 each, so that both sides
     of every breakpoint appear (the node at an interval's start is after the breakpoint's jump)."""
-    s, y, (v, u, n, m) = general.node_quantities(robot, act, load, gravity, *ys)
-    return Solution(s, y.p, y.R, n, m, y.N, y.M, v, u, res, jnp.max(jnp.abs(res)), info.iterations, info.stages, info.result)
+    nodes, pl, act, lengths, slack = ys
+    s, y, (v, u, n, m) = general.node_quantities(robot, act, load, gravity, nodes, pl)
+    # a slack tendon's tension is zero to round-off at the root (the Fischer-Burmeister row is
+    # linear in it there): reported as exactly zero; a driven tendon's encoder reads its command
+    tensions = jnp.where(slack, 0.0, jnp.asarray(act.tensions, float))
+    displacements = general.displacements(robot, act, lengths)
+    if act.driven:
+        displacements = displacements.at[np.asarray(act.driven)].set(act.displacements)
+    return GeneralSolution(
+        s, y.p, y.R, n, m, y.N, y.M, v, u, res, jnp.max(jnp.abs(res)), info.iterations, info.stages, info.result,
+        tensions, displacements, slack,
+    )  # fmt: skip
+
+
+@pytree
+class GeneralSolution(Solution):
+    """The Solution of a GeneralRobot, with each tendon's tension, displacement and slack flag.
+
+    Nodes come interval by interval (``general.py``), ``steps + 1`` each: both sides of every
+    breakpoint appear, ``total_force`` and ``total_moment`` jumping at point loads.
+
+    Attributes (besides Solution's):
+        tensions: each tendon's tension [N], (n_t,): the given ones, and those found for the
+            displacement-driven tendons.
+        displacements: what each tendon's encoder reads [m], (n_t,): its rest length inside the
+            straight robot less its present rest length there (positive when pulled); for a
+            displacement-driven tendon, its command (more than the shape takes up where slack).
+        slack: True for a displacement-driven tendon gone slack (its tension exactly 0), (n_t,).
+    """
+
+    tensions: jax.Array
+    displacements: jax.Array
+    slack: jax.Array
 
 
 def _node_quantities(back: Segment, sil: Segment, y: State, in_backbone):

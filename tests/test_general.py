@@ -227,6 +227,9 @@ def test_anchored_tendon_bends_a_circular_arc_then_straight(anchored):
     t_a = np.asarray(sol.rotation)[i_a, :, 2]
     np.testing.assert_allclose(t_a, [0.0, -np.sin(u[0] * ANCHOR), np.cos(u[0] * ANCHOR)], rtol=0, atol=ARC_ATOL)
     np.testing.assert_allclose(p[after], p[i_a] + np.outer(s[after] - ANCHOR, t_a), rtol=0, atol=1e-13)
+    # the tendon's length is s_a |pb| (pb constant along the arc): its displacement s_a (1 - |pb|)
+    pb = np.array([0.0, v[1], v[2] + u[0] * OFFSET])
+    assert float(sol.displacements[0]) == pytest.approx(ANCHOR * (1 - np.linalg.norm(pb)), rel=1e-9)
 
 
 def test_point_force_on_a_cantilever_matches_beam_theory():
@@ -480,3 +483,48 @@ def test_helical_tendons_match_the_independent_implementation():
     reference = rucker_webster_tip(0.4, 1.4e-3, 54e9, 0.3, 6450.0, tendons, G, TWO_TIP_FORCE)
     np.testing.assert_allclose(sol.tip_position, reference, rtol=0, atol=INDEPENDENT_ATOL)
     assert np.max(np.abs(np.asarray(sol.tip_position) - reference)) < 1e-8
+
+
+# ---- displacement control ----------------------------------------------------------------------
+
+DRIVEN = (0, 2, 4, 5)  # mixed control: tendons 1 and 3 (zero tension) stay tension-controlled
+
+
+@pytest.fixture(scope="session")
+def by_tension():
+    robot = tdct.Robot.from_toml(ROBOTS / "two_segment.toml")
+    load = tdct.Loads(tip_force=TWO_TIP_FORCE)
+    return robot, load, tdct.solve(robot, tdct.GeneralActuation(TWO_TENSIONS), load, gravity=G)
+
+
+def test_displacements_fed_back_return_the_tensions_and_the_shape(by_tension):
+    """Acceptance item 5: a tension-controlled solution's displacements, fed back as displacement
+    control (from zero tensions), give back its tensions and shape."""
+    robot, load, sol = by_tension
+    d = np.asarray(sol.displacements)
+    act = tdct.GeneralActuation(np.zeros(6), displacements=d[list(DRIVEN)], driven=DRIVEN)
+    back = tdct.solve(robot, act, load, gravity=G)
+    assert rel(back.tensions, TWO_TENSIONS) < 1e-9
+    assert rel(back.position, sol.position) < 1e-9
+    assert not np.any(back.slack)
+    np.testing.assert_allclose(back.displacements, d, rtol=1e-9)
+
+
+def test_slack_exactly_where_the_tension_would_be_negative(by_tension):
+    """Tendon 1 carries no tension in the reference: commanded a little less than its reading it
+    goes slack (tension exactly 0, the shape unchanged), a little more and it pulls."""
+    robot, load, sol = by_tension
+    d = np.asarray(sol.displacements)
+    driven = (0, 1, 2, 4, 5)
+    eps = 1e-5  # m
+    results = []
+    for delta in (-eps, eps):
+        command = d[list(driven)] + np.array([0.0, delta, 0.0, 0.0, 0.0])
+        results.append(
+            tdct.solve(robot, tdct.GeneralActuation(np.zeros(6), displacements=command, driven=driven), load, gravity=G)
+        )
+    slack, taut = results
+    assert list(np.asarray(slack.slack)) == [False, True, False, False, False, False]
+    assert float(slack.tensions[1]) == 0.0
+    assert rel(slack.tensions, TWO_TENSIONS) < 1e-9 and rel(slack.position, sol.position) < 1e-9
+    assert not np.any(taut.slack) and float(taut.tensions[1]) > 0.0
