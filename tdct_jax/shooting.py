@@ -138,8 +138,11 @@ def root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: So
     """
     F_c = force_scale(robot, act, load, gravity)
     x_straight = straight_rod(robot, act, load, gravity, F_c)
-    start = jnp.concatenate([scaled(robot, guess, F_c), x_straight[6:]])  # x_straight[6:]: driven tensions
-    x0 = jnp.where(jnp.all(jnp.isfinite(guess)), start, x_straight)
+    finite = jnp.all(jnp.isfinite(guess))
+    start = scaled(robot, guess, F_c)
+    if x_straight.size > 6:  # a GeneralRobot's displacement-driven tensions
+        start = jnp.concatenate([start, x_straight[6:]])
+    x0 = jnp.where(finite, start, x_straight)
 
     def F_at(lam):
         act_lam = act.scaled(lam) if isinstance(robot, GeneralRobot) else dataclasses.replace(act, tensions=lam * act.tensions)
@@ -227,7 +230,8 @@ def tip_compliance(robot: Robot, R_tip, J_res, J_p, J_R, F_c):
     dres_dw = jnp.diag(jnp.repeat(jnp.stack([1 / F_c, 1 / (F_c * robot.length)]), 3))
     # unknowns beyond the base wrench (displacement-driven tensions): their residuals hold the
     # displacements, which the tip load does not enter
-    dres_dw = jnp.concatenate([dres_dw, jnp.zeros((J_res.shape[0] - 6, 6))])
+    if J_res.shape[0] > 6:
+        dres_dw = jnp.concatenate([dres_dw, jnp.zeros((J_res.shape[0] - 6, 6))])
     dx_dw = jnp.linalg.solve(J_res, dres_dw)
     return jnp.concatenate([J_p @ dx_dw, rotation_columns(J_R @ dx_dw, R_tip)])
 
