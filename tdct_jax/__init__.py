@@ -15,11 +15,18 @@ from .data import Experiment as Experiment  # noqa: E402
 from .data import read_experiment as read_experiment  # noqa: E402
 from .data import read_experiments as read_experiments  # noqa: E402
 from .data import write_experiment as write_experiment  # noqa: E402
+from .description import GeneralRobot as GeneralRobot  # noqa: E402
+from .description import PointMass as PointMass  # noqa: E402
+from .description import Section as Section  # noqa: E402
+from .description import Tendon as Tendon  # noqa: E402
+from .description import Tube as Tube  # noqa: E402
 from .ik import Bounds as Bounds  # noqa: E402
 from .ik import IKResult as IKResult  # noqa: E402
 from .ik import Target as Target  # noqa: E402
 from .ik import inverse_kinematics as inverse_kinematics  # noqa: E402
 from .ik import track as track  # noqa: E402
+from .inputs import GeneralActuation as GeneralActuation  # noqa: E402
+from .inputs import Loads as Loads  # noqa: E402
 from .loads import STANDARD_GRAVITY as STANDARD_GRAVITY  # noqa: E402
 from .loads import Actuation as Actuation  # noqa: E402
 from .loads import TipLoad as TipLoad  # noqa: E402
@@ -46,6 +53,7 @@ from .results import SweepResult as SweepResult  # noqa: E402
 from .results import gather as gather  # noqa: E402
 from .robot import CalibrationWarning as CalibrationWarning  # noqa: E402
 from .robot import Robot as Robot  # noqa: E402
+from .solve import GeneralSolution as GeneralSolution  # noqa: E402
 from .solve import Solution as Solution  # noqa: E402
 from .solve import solve as solve  # noqa: E402
 from .solve import tip_angle as tip_angle  # noqa: E402

@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .checks import as_array, check_range
+from .inputs import GeneralActuation, Loads
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .options import DEFAULT_SOLVER, SolverOptions
 from .robot import SCALAR_FIELDS, Robot
@@ -88,16 +89,21 @@ def pose_jacobian(robot, act, load, gravity, guess, solver, wrt):
     """(d(tip pose) / dw, Solution) for w the tip load ("load"), the actuation ("actuation") or a
     tuple of scalar Robot field names; the rotation part is vee(dR R^T) in the world frame, (6, n)."""
     if wrt == "load":
-        w = jnp.concatenate([jnp.asarray(load.force), jnp.asarray(load.moment)])
+        general = isinstance(load, Loads)
+        force, moment = (load.tip_force, load.tip_moment) if general else (load.force, load.moment)
+        w = jnp.concatenate([jnp.asarray(force), jnp.asarray(moment)])
 
         def configure(w):
-            return robot, act, TipLoad(w[:3], w[3:])
+            return robot, act, dataclasses.replace(load, tip_force=w[:3], tip_moment=w[3:]) if general else TipLoad(w[:3], w[3:])
 
     elif wrt == "actuation":
-        w = jnp.concatenate([jnp.asarray(act.tensions), jnp.reshape(jnp.asarray(act.insertion), (1,))])
+        general = isinstance(act, GeneralActuation)
+        depth = act.insertions if general else jnp.reshape(jnp.asarray(act.insertion), (1,))
+        w = jnp.concatenate([jnp.asarray(act.tensions), jnp.asarray(depth, float)])
+        n_t = jnp.size(act.tensions)
 
         def configure(w):
-            return robot, Actuation(w[:-1], w[-1]), load
+            return robot, GeneralActuation(w[:n_t], w[n_t:]) if general else Actuation(w[:-1], w[-1]), load
 
     else:
         w = jnp.stack([jnp.asarray(getattr(robot, p)) for p in wrt])
@@ -117,7 +123,8 @@ _pose_jacobian = jax.jit(pose_jacobian, static_argnums=(6,))
 
 
 def kinematic_jacobian(robot, act, load=None, *, gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True):
-    """d(tip position [m], tip rotation vector [rad]) / d(tensions [N], insertion [m]), shape (6, n_t + 1).
+    """d(tip position [m], tip rotation vector [rad]) / d(tensions [N], insertion [m]), shape (6, n_t + 1)
+    (a GeneralRobot: (6, n_t + n_tubes), one column per tube's insertion).
 
     The last column is the tube insertion depth, a real differentiable input (one-sided at d = 0
     and d = L, where the solution extends smoothly). Arguments as for ``compliance``.

@@ -186,6 +186,9 @@ class Robot:
     def from_toml(cls, path: str | Path) -> Robot:
         """Reads a robot from a TOML file of Robot field names in SI units (missing ones default).
 
+        A file with ``[[sections]]`` is the general robot file (docs/robot-file.md): it gives a
+        ``tdct.GeneralRobot`` (``GeneralRobot.from_toml``).
+
         Raises:
             ValueError: the file cannot be read or parsed, has unknown keys or bad values.
         """
@@ -194,6 +197,10 @@ class Robot:
             data = tomllib.loads(path.read_text())
         except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
             raise ValueError(f"cannot read robot file {path}: {e}") from e
+        if "sections" in data:
+            from .description import GeneralRobot
+
+            return GeneralRobot.from_toml(path)
         data = data.get("robot", data)
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - known)
@@ -211,6 +218,15 @@ class Robot:
             else:
                 warnings.warn_explicit(note.message, note.category, note.filename, note.lineno)
         return robot
+
+    def to_general(self):
+        """This robot as a ``tdct.GeneralRobot`` (one section, tendons at the tip, one tube whose
+        depth is the actuation's insertion): ``tdct.solve`` gives the same results for both
+        (within 1e-12 relative). ``Robot`` keeps its own fields and solver path, used by
+        calibration, sweeps, the CLI and the paper studies."""
+        from .description import from_paper
+
+        return from_paper(self)
 
     @property
     def n_tendons(self) -> int:

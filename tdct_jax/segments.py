@@ -60,6 +60,8 @@ class Segment:
             leaf, so that both segments run through one compiled vector field).
         tilt: tendon tangents follow pb_t = u x r_t + v ("exact"); False uses t_t = e3, the printed
             eqs. 21-22 ("paper" backbone option). Static.
+        dr: body-frame r_t' of helical tendons, (n_t, 3), adding to pb_t; None (default): straight
+            tendons (r_t' = 0), and nothing is added.
     """
 
     K_se: jax.Array
@@ -69,6 +71,7 @@ class Segment:
     r: jax.Array
     backbone: jax.Array
     tilt: bool = dataclasses.field(metadata=dict(static=True), default=True)
+    dr: jax.Array | None = None
 
 
 NEWTON_STEPS = 2
@@ -81,13 +84,14 @@ def tendon_tangents(seg: Segment, v, u):
     """Body-frame unit tangents t_t of the tendons, (n_t, 3)."""
     if not seg.tilt:
         return jnp.broadcast_to(E3, seg.r.shape)
-    pb = _tendon_tangent(seg.r, v, u)
+    pb = _tendon_tangent(seg, v, u)
     return pb / jnp.linalg.norm(pb, axis=-1, keepdims=True)
 
 
-def _tendon_tangent(r, v, u):
-    """Unnormalised body-frame tendon tangents pb_t = u x r_t + v, (n_t, 3)."""
-    return jnp.cross(u[None], r) + v[None]
+def _tendon_tangent(seg: Segment, v, u):
+    """Unnormalised body-frame tendon tangents pb_t = u x r_t + r_t' + v, (n_t, 3)."""
+    pb = jnp.cross(u[None], seg.r) + v[None]
+    return pb if seg.dr is None else pb + seg.dr
 
 
 def strains(seg: Segment, R, N, M):
@@ -116,7 +120,7 @@ def _residual_and_jacobian(seg: Segment, w, bf, bm):
     """
     v, u = w[:3], w[3:]
     tau = seg.tau
-    pb = _tendon_tangent(seg.r, v, u)
+    pb = _tendon_tangent(seg, v, u)
     norm = jnp.linalg.norm(pb, axis=-1)
     t = pb / norm[:, None]
     F = jnp.concatenate([seg.K_se * (v - E3) + tau @ t - bf, seg.K_bt * u + tau @ jnp.cross(seg.r, t) - bm])

@@ -15,6 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from . import general
+from .description import GeneralRobot
 from .integrate import rk4
 from .loads import Actuation, TipLoad
 from .newton import broyden, continuation
@@ -40,6 +42,8 @@ def force_scale(robot: Robot, act: Actuation, load: TipLoad, gravity):
 
     A constant for differentiation: it only reparametrises the unknowns.
     """
+    if isinstance(robot, GeneralRobot):
+        return general.force_scale(robot, act, load, gravity)
     robot, act, load, gravity = lax.stop_gradient((robot, act, load, gravity))
     weight = jnp.linalg.norm(gravity) * (robot.linear_density(False) * robot.length + robot.tube_linear_density * act.insertion)
     F = jnp.sum(act.tensions) + jnp.linalg.norm(load.force) + jnp.linalg.norm(load.moment) / robot.length + weight
@@ -48,6 +52,8 @@ def force_scale(robot: Robot, act: Actuation, load: TipLoad, gravity):
 
 def straight_rod(robot: Robot, act: Actuation, load: TipLoad, gravity, F_c):
     """Scaled base unknowns of the straight rod: exact in force, first-order in moment."""
+    if isinstance(robot, GeneralRobot):
+        return general.straight_rod(robot, act, load, gravity, F_c)
     L, d = robot.length, act.insertion
     rho1, rho2 = robot.linear_density(False), robot.tube_linear_density
     N0 = load.force + gravity * (rho1 * L + rho2 * d)
@@ -70,8 +76,10 @@ def shoot(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOp
 
     Returns:
         The scaled tip residual (6,) and the tip State (with ``path``: the States at all
-        2 * steps + 1 nodes, s = d once).
+        2 * steps + 1 nodes, s = d once). A GeneralRobot goes to ``general.shoot``.
     """
+    if isinstance(robot, GeneralRobot):
+        return general.shoot(robot, act, load, gravity, solver, x, F_c, path)
     back, sil = segments(robot, act, solver)
     L, d, n = robot.length, act.insertion, solver.steps
     y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:] * F_c * L)
@@ -130,11 +138,15 @@ def root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: So
     """
     F_c = force_scale(robot, act, load, gravity)
     x_straight = straight_rod(robot, act, load, gravity, F_c)
-    x0 = jnp.where(jnp.all(jnp.isfinite(guess)), scaled(robot, guess, F_c), x_straight)
+    finite = jnp.all(jnp.isfinite(guess))
+    start = scaled(robot, guess, F_c)
+    if x_straight.size > 6:  # a GeneralRobot's displacement-driven tensions
+        start = jnp.concatenate([start, x_straight[6:]])
+    x0 = jnp.where(finite, start, x_straight)
 
     def F_at(lam):
-        act_lam = dataclasses.replace(act, tensions=lam * act.tensions)
-        load_lam = TipLoad(lam * load.force, lam * load.moment)
+        act_lam = act.scaled(lam) if isinstance(robot, GeneralRobot) else dataclasses.replace(act, tensions=lam * act.tensions)
+        load_lam = TipLoad(lam * load.force, lam * load.moment) if isinstance(load, TipLoad) else load.scaled(lam)
 
         def F(x):
             res, tip = shoot(robot, act_lam, load_lam, lam * gravity, solver, x, F_c)
@@ -213,8 +225,14 @@ def _jacobian_at_root_jvp(primals, tangents):
 def tip_compliance(robot: Robot, R_tip, J_res, J_p, J_R, F_c):
     """The 6x6 tip compliance d(tip position, tip rotation vector) / d(F_e, M_e) (eq. 41) from the
     Jacobians of the residual and of the tip pose (p, R) with respect to the scaled unknowns at
-    the root: the tip load enters only the residual, d res / d(F_e, M_e) = -diag(1 / F_c, 1 / (F_c L))."""
-    dx_dw = jnp.linalg.solve(J_res, jnp.diag(jnp.repeat(jnp.stack([1 / F_c, 1 / (F_c * robot.length)]), 3)))
+    the root: the tip load enters only the residual, d res / d(F_e, M_e) = -diag(1 / F_c, 1 / (F_c L)).
+    With displacement-driven tendons the displacements are held: their tensions adjust."""
+    dres_dw = jnp.diag(jnp.repeat(jnp.stack([1 / F_c, 1 / (F_c * robot.length)]), 3))
+    # unknowns beyond the base wrench (displacement-driven tensions): their residuals hold the
+    # displacements, which the tip load does not enter
+    if J_res.shape[0] > 6:
+        dres_dw = jnp.concatenate([dres_dw, jnp.zeros((J_res.shape[0] - 6, 6))])
+    dx_dw = jnp.linalg.solve(J_res, dres_dw)
     return jnp.concatenate([J_p @ dx_dw, rotation_columns(J_R @ dx_dw, R_tip)])
 
 

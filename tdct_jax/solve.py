@@ -7,8 +7,10 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from . import status
+from . import general, status
 from .checks import as_array, check_range, is_concrete
+from .description import GeneralRobot
+from .inputs import GeneralActuation, Loads
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
 from .robot import Robot
@@ -100,7 +102,47 @@ def solution_at(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: So
     """The Solution at the scaled base unknowns x of a root found elsewhere (``info``: its
     iterations, stages and result code), by one integration along the path."""
     res, ys = shoot(robot, act, load, gravity, solver, x, force_scale(robot, act, load, gravity), path=True)
+    if isinstance(robot, GeneralRobot):
+        return _assemble_general(robot, act, load, gravity, ys, res, info)
     return _assemble(robot, act, solver, ys, res, info)
+
+
+def _assemble_general(robot, act, load, gravity, ys, res, info) -> Solution:
+    """Solution of a GeneralRobot: nodes interval by interval, steps + 1 each, so that both sides
+    of every breakpoint appear (the node at an interval's start is after the breakpoint's jump)."""
+    nodes, pl, act, lengths, slack = ys
+    s, y, (v, u, n, m) = general.node_quantities(robot, act, load, gravity, nodes, pl)
+    # a slack tendon's tension is zero to round-off at the root (the Fischer-Burmeister row is
+    # linear in it there): reported as exactly zero; a driven tendon's encoder reads its command
+    tensions = jnp.where(slack, 0.0, jnp.asarray(act.tensions, float))
+    displacements = general.displacements(robot, act, lengths)
+    if act.driven:
+        displacements = displacements.at[np.asarray(act.driven)].set(act.displacements)
+    return GeneralSolution(
+        s, y.p, y.R, n, m, y.N, y.M, v, u, res, jnp.max(jnp.abs(res)), info.iterations, info.stages, info.result,
+        tensions, displacements, slack,
+    )  # fmt: skip
+
+
+@pytree
+class GeneralSolution(Solution):
+    """The Solution of a GeneralRobot, with each tendon's tension, displacement and slack flag.
+
+    Nodes come interval by interval (``general.py``), ``steps + 1`` each: both sides of every
+    breakpoint appear, ``total_force`` and ``total_moment`` jumping at point loads.
+
+    Attributes (besides Solution's):
+        tensions: each tendon's tension [N], (n_t,): the given ones, and those found for the
+            displacement-driven tendons.
+        displacements: what each tendon's encoder reads [m], (n_t,): its rest length inside the
+            straight robot less its present rest length there (positive when pulled); for a
+            displacement-driven tendon, its command (more than the shape takes up where slack).
+        slack: True for a displacement-driven tendon gone slack (its tension exactly 0), (n_t,).
+    """
+
+    tensions: jax.Array
+    displacements: jax.Array
+    slack: jax.Array
 
 
 def _node_quantities(back: Segment, sil: Segment, y: State, in_backbone):
@@ -142,9 +184,9 @@ def _assemble(robot, act, solver, ys: State, res, info) -> Solution:
 
 
 def solve(
-    robot: Robot,
-    act: Actuation,
-    load: TipLoad | None = None,
+    robot: Robot | GeneralRobot,
+    act: Actuation | GeneralActuation | None = None,
+    load: TipLoad | Loads | None = None,
     *,
     gravity=STANDARD_GRAVITY,
     solver: SolverOptions = DEFAULT_SOLVER,
@@ -159,9 +201,13 @@ def solve(
     ``jax.jacfwd`` and ``jax.vmap`` pass straight through.
 
     Args:
-        robot: geometry and materials.
-        act: tendon tensions [N] and tube insertion depth [m].
-        load: tip force [N] and moment [N m] in the world frame; none by default.
+        robot: geometry and materials: the paper's ``Robot``, or any ``GeneralRobot`` (sections,
+            tendons anchored anywhere, tubes, point masses; general.py).
+        act: tendon tensions [N] and tube insertion depth [m]; for a GeneralRobot a
+            GeneralActuation (tensions and per-tube insertions), an Actuation (one tube), or None
+            for a robot without tendons and tubes.
+        load: tip force [N] and moment [N m] in the world frame; none by default. For a
+            GeneralRobot also ``Loads`` (point loads along the body, a distributed force).
         gravity: world gravity [m/s^2]; None or zeros switch the robot's weight off.
         solver: steps, transition, tendon model, tolerance and Newton limit (SolverOptions).
         guess: base force and moment (N(0) [N], M(0) [N m]), shape (6,), to start Newton from,
@@ -197,7 +243,13 @@ def check_solution(sol: Solution, solver: SolverOptions, throw: bool, what: str 
 
 
 def solve_arguments(robot, act, load, gravity, guess, solver) -> tuple:
-    """Checks a single solve's arguments; returns those of ``solution_and_compliance``."""
+    """Checks a single solve's arguments; returns those of ``solution_and_compliance``. A
+    GeneralRobot takes a GeneralActuation (or an Actuation, or None) and Loads (or a TipLoad)."""
+    if isinstance(robot, GeneralRobot):
+        act, load = GeneralActuation.of(act, robot.n_tubes), Loads.of(load)
+        general.check_arguments(robot, act, load, solver)
+        guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
+        return robot, act, load, *_on_cpu(gravity_vector(gravity), guess), solver
     load = TipLoad() if load is None else load
     check_inputs(robot, act, load, solver)
     robot.warn_outside_calibration(act.tensions, load.force)

@@ -1,0 +1,387 @@
+"""Shooting on a ``GeneralRobot``: breakpoints, intervals, the integration across them, the node
+quantities (docs/model.md; issue 23).
+
+The state is segments.py's (p, R, N, M), N and M the *total* force and moment of rod plus tendons.
+Along s the segment parameters change only at breakpoints:
+
+    {0, L} + interior section ends + tube depths + tendon anchors + point-mass and point-load
+    locations
+
+Their number is static, their values traced (differentiable); they are sorted at run time. Each
+interval [b_k, b_k+1] gets ``solver.steps`` RK4 steps (a zero-length interval returns its state)
+and one set of segment parameters, those at its midpoint: section stiffness K_se, K_bt (plus the
+tubes inside), linear density, backbone flag (some tube inside: no shear, eq. 16), and each
+tendon's tension, masked to zero beyond its anchor. With total N, M an anchor needs no jump: the
+tendon simply leaves the cross-section and the rod's own n, m change by its Rucker-Webster point
+force and moment, which the constitutive solve gives by itself. Section and tube ends are the
+"balanced" transition: the state is continuous. A point force F and moment C at s_p (a point mass:
+F = m g) give N(s_p+) = N(s_p-) - F, M(s_p+) = M(s_p-) - C, applied at the start of the interval
+that begins at s_p (or, at s_p = L, before the tip condition N(L) = F_e, M(L) = M_e).
+
+Helical tendons: r_t(s) turns with the twist rate, so the tendon tangent is pb_t = u x r_t + r_t' + v;
+s rides in the state (s' = 1) so that every RK4 stage sees its own r_t(s). Where no tendon has a
+twist (``Tendon.twist`` None, static) r_t is constant and s is not carried: the paper's robot
+through this path then costs what it costs through ``Robot``'s.
+
+The intervals are what multiple shooting will use: ``plan`` gives each one's ends and parameters.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from .checks import check_range, is_concrete
+from .description import GeneralRobot, section_area
+from .inputs import GeneralActuation, Loads
+from .integrate import rk4
+from .segments import E3, Segment, State, rod_force, strains
+from .so3 import hat, orthonormalize
+
+
+class Interval(NamedTuple):
+    """Segment parameters of one interval (a leading axis over intervals in ``Plan``).
+
+    K_se (3,) [N], K_bt (3,) [N m^2], rho [kg/m], backbone (1.0: a tube inside), tau (n_t,) [N]
+    (zero beyond each anchor), present (n_t,) (1.0 before each anchor)."""
+
+    K_se: jax.Array
+    K_bt: jax.Array
+    rho: jax.Array
+    backbone: jax.Array
+    tau: jax.Array
+    present: jax.Array
+
+
+class Plan(NamedTuple):
+    """The integration plan: sorted breakpoints b (K + 1,), the intervals' parameters (K, ...), and
+    the jump (dN, dM) applied at each breakpoint (K + 1, 3) each."""
+
+    b: jax.Array
+    intervals: Interval
+    dN: jax.Array
+    dM: jax.Array
+
+
+def _tendon_fields(robot: GeneralRobot):
+    """Stacked tendon routing: offsets, base angles, twist rates, (n_t,) each."""
+    if not robot.tendons:
+        return [jnp.zeros(0)] * 3
+    twist = [0.0 if t.twist is None else t.twist for t in robot.tendons]
+    return [jnp.stack([jnp.asarray(getattr(t, k), float) for t in robot.tendons]) for k in ("offset", "angle")] + [
+        jnp.stack([jnp.asarray(x, float) for x in twist])
+    ]
+
+
+def is_helical(robot: GeneralRobot) -> bool:
+    """Some tendon has a twist rate (static): r_t depends on s."""
+    return any(t.twist is not None for t in robot.tendons)
+
+
+def tendon_positions(robot: GeneralRobot, s):
+    """r_t(s) and r_t'(s) of every tendon, body frame, (n_t, 3) each (Tendon.position); r_t' is
+    None for a robot without helical tendons."""
+    offset, angle, twist = _tendon_fields(robot)
+    if not is_helical(robot):
+        a = angle
+        return offset[:, None] * jnp.stack([jnp.cos(a), jnp.sin(a), jnp.zeros_like(a)], axis=-1), None
+    a = angle + twist * s
+    c, sn = jnp.cos(a), jnp.sin(a)
+    r = offset[:, None] * jnp.stack([c, sn, jnp.zeros_like(a)], axis=-1)
+    dr = (offset * twist)[:, None] * jnp.stack([-sn, c, jnp.zeros_like(a)], axis=-1)
+    return r, dr
+
+
+def _anchors(robot: GeneralRobot):
+    """Anchor arc lengths (n_t,), the tip's for tendons anchored there."""
+    return jnp.stack([robot.length if t.end is None else t.end for t in robot.tendons]) if robot.tendons else jnp.zeros(0)
+
+
+def _section_ends(robot: GeneralRobot):
+    """Interior section ends (n_sections - 1,): the last section ends at ``robot.length``."""
+    return jnp.stack([s.end for s in robot.sections[:-1]]) if len(robot.sections) > 1 else jnp.zeros(0)
+
+
+def interval_parameters(robot: GeneralRobot, act: GeneralActuation, k, rank: Ranks, s):
+    """K_se (3,), K_bt (3,), linear density, backbone flag and masked tensions of interval k
+    (eqs. 6-7, 14-16, 29-30). Which section, tubes and tendons it holds follows from the sorted
+    order of the breakpoints (``rank``: each breakpoint's position), not from comparing arc
+    lengths, so that a zero-length interval gets the parameters of the interval it becomes when
+    its ends move apart (e.g. the tube's at d = 0: derivatives in d are then the right-hand ones).
+    ``s`` (the midpoint) only sets the angle of helical tendons' channels."""
+    idx = jnp.sum(rank.section_ends <= k)
+    present = (rank.anchors > k) if robot.tendons else jnp.zeros(0, bool)
+    anchors = _anchors(robot)
+    starts = [0.0, *(sec.end for sec in robot.sections[:-1])]
+    r, _ = tendon_positions(robot, s)
+    props = []
+    for start, sec in zip(starts, robot.sections, strict=True):
+        through = (start < anchors).astype(float)  # tendons whose channels cut this section
+        A = section_area(sec, jnp.sum(through))
+        disc = jnp.pi / 64 * (sec.outer_diameter**4 - sec.inner_diameter**4)
+        dt = sec.tendon_channel_diameter
+        own, hole = jnp.pi / 64 * dt**4, jnp.pi / 4 * dt**2
+        I_x = disc - jnp.sum(through * (own + hole * r[:, 1] ** 2))
+        I_y = disc - jnp.sum(through * (own + hole * r[:, 0] ** 2))
+        G = sec.E / (2 * (1 + sec.nu))
+        props.append(jnp.stack([G * A, G * A, sec.E * A, sec.E * I_x, sec.E * I_y, G * (I_x + I_y), sec.density * A]))
+    p = jnp.stack(props)[idx]
+    if robot.tubes:
+        inside = rank.tubes > k
+        EI = jnp.sum(jnp.where(inside, jnp.stack([t.E * t.second_moment for t in robot.tubes]), 0.0))
+        rho_t = jnp.sum(jnp.where(inside, jnp.stack([t.density * t.area for t in robot.tubes]), 0.0))
+        backbone = jnp.any(inside).astype(float)
+    else:
+        EI = rho_t = backbone = jnp.zeros(())
+    tau = jnp.where(present, jnp.asarray(act.tensions, float), 0.0)
+    return Interval(p[:3], jnp.stack([p[3] + EI, p[4] + EI, p[5]]), p[6] + rho_t, backbone, tau, present.astype(float))
+
+
+class Ranks(NamedTuple):
+    """Positions in the sorted breakpoints of the interior section ends, the tube depths and the
+    tendon anchors (tendons anchored at the tip: a position past every interval)."""
+
+    section_ends: jax.Array
+    tubes: jax.Array
+    anchors: jax.Array
+
+
+def _point_loads(robot: GeneralRobot, load: Loads, gravity):
+    """Arc lengths (k,) and world force (k, 3) and moment (k, 3) of the point loads and masses."""
+    s = [jnp.asarray(load.point_s, float)]
+    F = [jnp.reshape(jnp.asarray(load.point_force, float), (-1, 3))]
+    C = [jnp.reshape(jnp.asarray(load.point_moment, float), (-1, 3))]
+    if robot.masses:
+        mass = jnp.stack([m.mass for m in robot.masses])
+        s.append(jnp.stack([m.s for m in robot.masses]))
+        F.append(mass[:, None] * gravity[None])
+        C.append(jnp.zeros((len(robot.masses), 3)))
+    return jnp.concatenate(s), jnp.concatenate(F), jnp.concatenate(C)
+
+
+def plan(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity) -> Plan:
+    """Breakpoints, sorted, with each interval's parameters and each breakpoint's jump.
+
+    The unsorted breakpoints are, in this order: the base, the interior section ends, the tube
+    depths, the anchors not at the tip, the point loads and masses, and L; ties keep this order.
+    """
+    L = jnp.asarray(robot.length, float)
+    s_p, F_p, C_p = _point_loads(robot, load, gravity)
+    anchored = [i for i, t in enumerate(robot.tendons) if t.end is not None]
+    parts = [
+        jnp.zeros(1),
+        _section_ends(robot),
+        jnp.asarray(act.insertions, float).reshape(-1),
+        jnp.stack([robot.tendons[i].end for i in anchored]) if anchored else jnp.zeros(0),
+        s_p,
+        L[None],
+    ]
+    b_all = jnp.concatenate(parts)
+    first = np.cumsum([0] + [p.size for p in parts])
+    zeros = jnp.zeros((first[4], 3))
+    dN_all = jnp.concatenate([zeros, -F_p, jnp.zeros((1, 3))])
+    dM_all = jnp.concatenate([zeros, -C_p, jnp.zeros((1, 3))])
+    order = jnp.argsort(b_all, stable=True)
+    rank = jnp.argsort(order, stable=True)
+    n = b_all.size
+    anchor_rank = jnp.full(robot.n_tendons, n, rank.dtype)
+    if anchored:
+        anchor_rank = anchor_rank.at[np.asarray(anchored)].set(rank[first[3] : first[4]])
+    ranks = Ranks(rank[first[1] : first[2]], rank[first[2] : first[3]], anchor_rank)
+    b = b_all[order]
+    k = jnp.arange(n - 1)
+    mid = (b[:-1] + b[1:]) / 2
+    intervals = jax.vmap(lambda k, s: interval_parameters(robot, act, k, ranks, s))(k, mid)
+    return Plan(b, intervals, dN_all[order], dM_all[order])
+
+
+def force_scale(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity):
+    """A typical force F_c [N] (shooting.force_scale for a GeneralRobot): tensions, tip load,
+    weight, point loads and distributed force. A constant for differentiation."""
+    robot, act, load, gravity = lax.stop_gradient((robot, act, load, gravity))
+    L = robot.length
+    weight = jnp.linalg.norm(gravity) * _mass_moments(robot, act)[0]
+    F = jnp.sum(act.tensions) + jnp.linalg.norm(load.tip_force) + jnp.linalg.norm(load.tip_moment) / L + weight
+    F = F + jnp.sum(jnp.linalg.norm(load.point_force, axis=-1)) + jnp.sum(jnp.linalg.norm(load.point_moment, axis=-1)) / L
+    return jnp.maximum(F + jnp.linalg.norm(load.distributed_force) * L, 1e-3)
+
+
+def _mass_moments(robot: GeneralRobot, act: GeneralActuation):
+    """Total mass [kg] and twice its first moment about the base along the straight rod [kg m]:
+    sections, tubes to their depths, point masses."""
+    starts = [0.0, *(s.end for s in robot.sections[:-1])]
+    ends = [*(s.end for s in robot.sections[:-1]), robot.length]
+    anchors = _anchors(robot)
+    m0 = m1 = 0.0
+    for a, b, sec in zip(starts, ends, robot.sections, strict=True):
+        rho = sec.density * section_area(sec, jnp.sum((a < anchors).astype(float)))
+        m0, m1 = m0 + rho * (b - a), m1 + rho * (b**2 - a**2)
+    for tube, d in zip(robot.tubes, jnp.asarray(act.insertions).reshape(-1), strict=True):
+        m0, m1 = m0 + tube.density * tube.area * d, m1 + tube.density * tube.area * d**2
+    for m in robot.masses:
+        m0, m1 = m0 + m.mass, m1 + 2 * m.mass * m.s
+    return m0, m1
+
+
+def straight_rod(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, F_c):
+    """Scaled base unknowns of the straight rod: every load's resultant exactly, its moment about
+    the base to first order (the moment arms of the undeformed robot)."""
+    L = robot.length
+    m0, m1 = _mass_moments(robot, act)
+    N0 = load.tip_force + gravity * m0
+    M0 = load.tip_moment + jnp.cross(L * E3, load.tip_force) + jnp.cross(E3, gravity) * m1 / 2
+    s_p = jnp.asarray(load.point_s, float)
+    N0 = N0 + jnp.sum(load.point_force, 0) + load.distributed_force * L
+    arms = s_p[:, None] * E3[None]
+    M0 = M0 + jnp.sum(load.point_moment + jnp.cross(arms, load.point_force), 0) + jnp.cross(E3, load.distributed_force) * L**2 / 2
+    guesses = jnp.asarray(act.tensions, float)[np.asarray(act.driven, int)]  # the driven tendons' given tensions
+    return jnp.concatenate([N0 / F_c, M0 / (F_c * L), guesses / F_c])
+
+
+def _segment(robot: GeneralRobot, P: Interval, s) -> Segment:
+    r, dr = tendon_positions(robot, s)
+    return Segment(P.K_se, P.K_bt, P.rho, P.tau, r, P.backbone, True, dr)
+
+
+class Carry(NamedTuple):
+    """What RK4 integrates: the State, and where needed the arc length s (helical tendons) and
+    each tendon's length from the base, l (n_t,) (displacements); None where not needed."""
+
+    y: State
+    s: jax.Array | None = None
+    l: jax.Array | None = None
+
+
+def rest_lengths(robot: GeneralRobot):
+    """Each tendon's length from the base to its anchor in the straight, unloaded robot [m], (n_t,)."""
+    offset, _, twist = _tendon_fields(robot)
+    return _anchors(robot) * jnp.sqrt(1 + (offset * twist) ** 2)
+
+
+def displacements(robot: GeneralRobot, act: GeneralActuation, lengths):
+    """What each tendon's encoder reads [m]: its rest length inside the robot less its present
+    rest length there, l / (1 + tau / EA) (l: its length along the shape), (n_t,)."""
+    EA = [jnp.inf if t.stiffness is None else t.stiffness for t in robot.tendons]
+    stretch = 1 + jnp.asarray(act.tensions, float) / jnp.stack([jnp.asarray(x, float) for x in EA]) if robot.tendons else 1.0
+    return rest_lengths(robot) - lengths / stretch
+
+
+def with_driven(act: GeneralActuation, x, F_c) -> GeneralActuation:
+    """The actuation with the displacement-driven tendons' tensions taken from the unknowns x[6:]."""
+    if not act.driven:
+        return act
+    tensions = jnp.asarray(act.tensions, float).at[np.asarray(act.driven)].set(x[6:] * F_c)
+    return GeneralActuation._rebuild(tensions, act.insertions, act.displacements, act.driven)
+
+
+def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solver, x, F_c, path: bool = False):
+    """Integrates every interval from the scaled unknowns x to the tip: x[:6] the base wrench
+    (N(0), M(0)), x[6:] the tensions of the displacement-driven tendons (act.driven) over F_c.
+
+    Returns:
+        The scaled residual: tip (6,), then per driven tendon phi(tau / F_c, (delta_shape -
+        delta) / L) with Fischer and Burmeister's phi(a, b) = a + b - |(a, b)|, zero where the
+        tendon is taut at its commanded displacement delta (b = 0, a >= 0) or slack (tau = 0, the
+        shape asking for more than was pulled: b > 0); and the tip State (with ``path``: the Carry
+        at every interval's steps + 1 nodes, shapes (K, steps + 1, ...), both sides of each
+        breakpoint, the node at an interval's start after that breakpoint's jump; and the plan).
+    """
+    act = with_driven(act, x, F_c)
+    pl = plan(robot, act, load, gravity)
+    L, n = robot.length, solver.steps
+    f_d = load.distributed_force
+    helical, lengths = is_helical(robot), bool(act.driven) or path
+    r_fixed = None if helical else tendon_positions(robot, 0.0)[0]
+
+    def field(P: Interval):
+        def f(_, c: Carry) -> Carry:
+            y = c.y
+            seg = _segment(robot, P, c.s) if helical else Segment(P.K_se, P.K_bt, P.rho, P.tau, r_fixed, P.backbone)
+            v, u = strains(seg, y.R, y.N, y.M)
+            dp = y.R @ v
+            dy = State(dp, y.R @ hat(u), -P.rho * gravity - f_d, -jnp.cross(dp, y.N))
+            dl = None
+            if lengths:
+                pb = jnp.cross(u[None], seg.r) + v[None] + (0.0 if seg.dr is None else seg.dr)
+                dl = P.present * jnp.linalg.norm(pb, axis=-1)
+            return Carry(dy, None if c.s is None else jnp.ones_like(c.s), dl)
+
+        return f
+
+    def project(c: Carry) -> Carry:
+        return c._replace(y=c.y._replace(R=orthonormalize(c.y.R)))
+
+    def interval(c: Carry, k):
+        P, b0, b1, dN, dM = k
+        y = c.y._replace(N=c.y.N + dN, M=c.y.M + dM)
+        out = rk4(field(P), Carry(y, b0 if helical else None, c.l), jnp.full(n, (b1 - b0) / n), None, project, path)
+        end, nodes = out if path else (out, None)
+        return end._replace(s=None), nodes
+
+    y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:6] * F_c * L)
+    end, nodes = lax.scan(
+        interval,
+        Carry(y0, None, jnp.zeros(robot.n_tendons) if lengths else None),
+        (pl.intervals, pl.b[:-1], pl.b[1:], pl.dN[:-1], pl.dM[:-1]),
+    )
+    N_L, M_L = end.y.N + pl.dN[-1], end.y.M + pl.dM[-1]
+    res = [(N_L - load.tip_force) / F_c, (M_L - load.tip_moment) / (F_c * L)]
+    slack = jnp.zeros(robot.n_tendons, bool)
+    if act.driven:
+        i = np.asarray(act.driven)
+        gap = displacements(robot, act, end.l)[i] - act.displacements
+        a, b = act.tensions[i] / F_c, gap / L
+        res.append(a + b - jnp.sqrt(a**2 + b**2))  # Fischer-Burmeister: zero iff a, b >= 0 and a b = 0
+        slack = slack.at[i].set(b > a)
+    res = jnp.concatenate(res)
+    return (res, (nodes, pl, act, end.l, slack)) if path else (res, end.y)
+
+
+def node_quantities(robot: GeneralRobot, act, load, gravity, nodes, pl: Plan):
+    """Flattened node arc lengths, States, strains v, u and rod force n, m, each node by its own
+    interval's segment parameters."""
+    ys, P = nodes.y, pl.intervals
+    K, m = pl.b.size - 1, jnp.shape(ys.p)[1]
+    # node arc lengths on the exact grid (the ones carried in the state differ in the last bit),
+    # each interval's last node exactly at its breakpoint
+    frac = (jnp.arange(m) / (m - 1))[None, :]
+    s = jnp.where(frac < 1, pl.b[:-1, None] + (pl.b[1:] - pl.b[:-1])[:, None] * frac, pl.b[1:, None])
+    flat = jax.tree.map(lambda a: a.reshape(K * m, *a.shape[2:]), ys)
+    P_nodes = jax.tree.map(lambda a: jnp.repeat(a, m, axis=0), P)
+
+    def one(args):
+        y, P, s = args
+        seg = _segment(robot, P, s)
+        v, u = strains(seg, y.R, y.N, y.M)
+        return (v, u, *rod_force(seg, y, v, u))
+
+    # lax.map, not vmap: see solve._assemble
+    return s.reshape(-1), flat, lax.map(one, (flat, P_nodes, s.reshape(-1)))
+
+
+def check_arguments(robot: GeneralRobot, act: GeneralActuation, load: Loads, solver) -> None:
+    """Counts and ranges that need robot and inputs together (ValueError naming field and range)."""
+    if solver.transition != "balanced" or solver.tendon_model != "exact":
+        raise ValueError(
+            f"solver transition = {solver.transition!r}, tendon_model = {solver.tendon_model!r}: a GeneralRobot is solved "
+            "with the 'balanced' transition and the 'exact' tendon model only (the paper's variants: tdct.Robot)"
+        )
+    n_t, n_tubes = robot.n_tendons, robot.n_tubes
+    if any(i >= n_t for i in act.driven):
+        raise ValueError(f"driven = {act.driven}: the robot has {n_t} tendons, indices 0 to {n_t - 1}")
+    if tuple(jnp.shape(act.tensions)) != (n_t,):
+        raise ValueError(f"tensions has shape {jnp.shape(act.tensions)}: the robot has {n_t} tendons, one tension each")
+    if tuple(jnp.shape(act.insertions)) != (n_tubes,):
+        raise ValueError(f"insertions has shape {jnp.shape(act.insertions)}: the robot has {n_tubes} tubes, one depth each")
+    if not is_concrete(robot.length):
+        return
+    L = float(robot.length)
+    check_range("insertions", act.insertions, 0.0, L, unit=f" m (0 to the robot length {L:g} m)")
+    check_range("point_s", load.point_s, 0.0, L, unit=f" m (0 to the robot length {L:g} m)")
+    for i, t in enumerate(robot.tendons):
+        if t.max_tension is not None and is_concrete(act.tensions) and is_concrete(t.max_tension):
+            check_range(f"tensions[{i}]", act.tensions[i], 0.0, float(t.max_tension), unit=f" N (tendons[{i}].max_tension)")

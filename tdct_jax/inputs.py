@@ -1,0 +1,145 @@
+"""What is done to a ``GeneralRobot``: tendon tensions and tube insertions (``GeneralActuation``),
+and dead loads along the body (``Loads``), all world-frame, all differentiable leaves.
+
+``TipLoad`` (loads.py) stays the shorthand for a tip force and moment; ``Loads.of`` turns one
+into a ``Loads``. Gravity stays the solver's ``gravity=`` argument, a vector in any direction.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from .checks import as_array, check_range, is_concrete
+from .loads import Actuation, TipLoad
+from .tree import pytree, set_fields, static
+
+
+@pytree
+class GeneralActuation:
+    """Joint-space inputs of a GeneralRobot (one configuration): each tendon driven by its tension
+    or, for those listed in ``driven``, by its displacement (the length pulled at the base, what
+    its encoder reads); mixed control is allowed.
+
+    Attributes:
+        tensions: tension of each tendon [N], shape (n_tendons,), in the robot's tendon order;
+            for a displacement-driven tendon, the start of the search (0 is fine).
+        insertions: depth of each tube from the base [m], shape (n_tubes,), in [0, L].
+        displacements: the commanded displacement of each driven tendon [m], shape (len(driven),):
+            its rest length inside the straight robot less its present rest length there (so
+            positive when pulled). Its tension is found so that the shape matches; where that
+            would take a negative tension the tendon goes slack (tension exactly 0,
+            ``GeneralSolution.slack``).
+        driven: indices of the displacement-driven tendons (static).
+    """
+
+    tensions: object = ()
+    insertions: object = ()
+    displacements: object = ()
+    driven: tuple = static(default=())
+
+    def __post_init__(self):
+        tensions = as_array("tensions", self.tensions, (np.size(self.tensions),) if is_concrete(self.tensions) else None)
+        check_range("tensions", tensions, 0.0, unit=" N")
+        driven = tuple(int(i) for i in self.driven)
+        if len(set(driven)) != len(driven) or any(i < 0 for i in driven):
+            raise ValueError(f"driven = {self.driven!r}: distinct tendon indices (0 for the first tendon) expected")
+        k = len(driven)
+        displacements = as_array(
+            "displacements", self.displacements, (k,) if is_concrete(self.displacements) else None, unit=" m"
+        )
+        set_fields(self, driven=driven, displacements=displacements)
+        insertions = as_array(
+            "insertions", self.insertions, (np.size(self.insertions),) if is_concrete(self.insertions) else None
+        )
+        check_range("insertions", insertions, 0.0, unit=" m")
+        set_fields(self, tensions=tensions, insertions=insertions)
+
+    @classmethod
+    def of(cls, act, n_tubes: int) -> GeneralActuation:
+        """A GeneralActuation from itself, None (nothing actuated) or a ``tdct.Actuation`` (its
+        scalar ``insertion`` is the one tube's depth, or ignored when it is 0 and there are none)."""
+        if act is None:
+            return cls()
+        if isinstance(act, cls):
+            return act
+        if isinstance(act, Actuation):
+            if n_tubes == 1:
+                return cls(act.tensions, jnp.reshape(act.insertion, (1,)) if not is_concrete(act.insertion) else [act.insertion])
+            if n_tubes == 0 and is_concrete(act.insertion) and float(act.insertion) == 0.0:
+                return cls(act.tensions, ())
+            raise ValueError(
+                f"a tdct.Actuation carries one insertion, the robot has {n_tubes} tubes: use tdct.GeneralActuation(tensions, insertions)"
+            )
+        raise TypeError(f"act must be a tdct.GeneralActuation or tdct.Actuation, got {type(act).__name__}")
+
+    @classmethod
+    def _rebuild(cls, tensions, insertions, displacements, driven) -> GeneralActuation:
+        """Built without the checks (inside the solver, from traced values)."""
+        out = object.__new__(cls)
+        for name, value in dict(tensions=tensions, insertions=insertions, displacements=displacements, driven=driven).items():
+            object.__setattr__(out, name, value)
+        return out
+
+    def scaled(self, lam) -> GeneralActuation:
+        """Tensions and displacements times lam (the solver's load continuation)."""
+        return self._rebuild(lam * self.tensions, self.insertions, lam * self.displacements, self.driven)
+
+
+@pytree
+class Loads:
+    """Dead loads on the robot, world frame.
+
+    Attributes:
+        tip_force: F_e at s = L [N], (3,).
+        tip_moment: M_e at s = L [N m], (3,).
+        point_s: arc lengths of the point loads [m], (k,), in [0, L].
+        point_force: their forces [N], (k, 3).
+        point_moment: their moments [N m], (k, 3).
+        distributed_force: a force per unit length along the whole body [N/m], (3,) (added to
+            the weight).
+    """
+
+    tip_force: object = (0.0, 0.0, 0.0)
+    tip_moment: object = (0.0, 0.0, 0.0)
+    point_s: object = ()
+    point_force: object = None
+    point_moment: object = None
+    distributed_force: object = (0.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        k = np.size(self.point_s) if is_concrete(self.point_s) else None
+        point_s = as_array("point_s", self.point_s, (k,) if k is not None else None, unit=" m")
+        check_range("point_s", point_s, 0.0, unit=" m")
+        values = {}
+        for name in ("point_force", "point_moment"):
+            x = getattr(self, name)
+            if x is None and k is not None:
+                x = np.zeros((k, 3))
+            values[name] = as_array(name, x, (k, 3) if k is not None and is_concrete(x) else None)
+        for name in ("tip_force", "tip_moment", "distributed_force"):
+            values[name] = as_array(name, getattr(self, name), (3,))
+        set_fields(self, point_s=point_s, **values)
+
+    @property
+    def n_points(self) -> int:
+        return int(np.shape(self.point_s)[0])
+
+    @classmethod
+    def of(cls, load) -> Loads:
+        """A Loads from itself, None (no load) or a ``TipLoad`` (its tip force and moment)."""
+        if load is None:
+            return cls()
+        if isinstance(load, cls):
+            return load
+        if isinstance(load, TipLoad):
+            return cls(tip_force=load.force, tip_moment=load.moment)
+        raise TypeError(f"load must be a tdct.Loads or tdct.TipLoad, got {type(load).__name__}")
+
+    def scaled(self, lam) -> Loads:
+        """Every load times lam (the solver's load continuation)."""
+        out = object.__new__(Loads)
+        for name in ("tip_force", "tip_moment", "point_force", "point_moment", "distributed_force"):
+            object.__setattr__(out, name, lam * getattr(self, name))
+        object.__setattr__(out, "point_s", self.point_s)
+        return out
