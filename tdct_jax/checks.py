@@ -6,6 +6,7 @@ import math
 import numbers
 import sys
 import tempfile
+import tomllib
 import warnings
 from pathlib import Path
 
@@ -197,3 +198,13 @@ def warn_user(message: str, category=UserWarning) -> None:
     while frame is not None and frame.f_globals.get("__name__", "").startswith("tdct_jax"):
         frame, level = frame.f_back, level + 1
     warnings.warn(message, category, stacklevel=level)
+
+
+def read_toml(path, what: str) -> dict:
+    """The top-level table of a TOML file; a ValueError "cannot read {what} {path}: ..." when the
+    file cannot be read or parsed."""
+    path = Path(path)
+    try:
+        return tomllib.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        raise ValueError(f"cannot read {what} {path}: {e}") from None

@@ -14,13 +14,12 @@ with a numeric ``end`` does, at that (traced, differentiable) arc length.
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
 
-from .checks import as_array, check_range, is_concrete
+from .checks import as_array, check_range, is_concrete, read_toml
 from .tree import pytree, set_fields
 
 NU_RANGE = (-1.0, 0.5)
@@ -266,10 +265,11 @@ class GeneralRobot:
                 message names the file, the field, the value and the allowed range.
         """
         path = Path(path)
-        try:
-            data = tomllib.loads(path.read_text())
-        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-            raise ValueError(f"cannot read robot file {path}: {e}") from e
+        return cls.from_table(read_toml(path, "robot file"), path)
+
+    @classmethod
+    def from_table(cls, data: dict, path) -> GeneralRobot:
+        """``from_dict`` of a robot file's table, its errors prefixed with the file's path."""
         try:
             return cls.from_dict(data)
         except (ValueError, TypeError) as e:

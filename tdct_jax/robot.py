@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 import warnings
 from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
 
-from .checks import UnitWarning, as_array, check_range, fmt, interval, is_concrete, plausibility_note, warn_user
+from .checks import UnitWarning, as_array, check_range, fmt, interval, is_concrete, plausibility_note, read_toml, warn_user
 from .tree import pytree, set_fields, static
 
 SCALAR_FIELDS = (
@@ -193,14 +192,11 @@ class Robot:
             ValueError: the file cannot be read or parsed, has unknown keys or bad values.
         """
         path = Path(path)
-        try:
-            data = tomllib.loads(path.read_text())
-        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-            raise ValueError(f"cannot read robot file {path}: {e}") from e
+        data = read_toml(path, "robot file")
         if "sections" in data:
             from .description import GeneralRobot
 
-            return GeneralRobot.from_toml(path)
+            return GeneralRobot.from_table(data, path)
         data = data.get("robot", data)
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - known)

@@ -24,12 +24,11 @@ A spec, SI units throughout (every key but one table of points is optional)::
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from pathlib import Path
 
 import numpy as np
 
-from .checks import check_integer
+from .checks import check_integer, read_toml
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .options import SolverOptions
 from .robot import Robot
@@ -56,10 +55,7 @@ def read_spec(path) -> dict:
             would not fit in host memory.
     """
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise ValueError(f"cannot read sweep spec {path}: {e}") from None
+    data = read_toml(path, "sweep spec")
     try:
         return _arguments(data, path.parent)
     except ValueError as e:
