@@ -343,10 +343,26 @@ def is_concrete_tree(obj) -> bool:
     return all(is_concrete(x) for x in jax.tree.leaves(obj))
 
 
+def channelled_area(outer, inner, dt, n_channels):
+    """Area [m^2] of a disc of diameter ``outer`` less a central channel ``inner`` and
+    ``n_channels`` tendon channels of diameter ``dt`` [m]."""
+    return jnp.pi / 4 * (outer**2 - inner**2 - n_channels * dt**2)
+
+
+def channelled_second_moments(outer, inner, dt, r, through):
+    """(I_x, I_y) [m^4] of the same disc, the tendon channels at body offsets r (n_t, 3) [m] that
+    ``through`` (n_t,) marks (1.0: cut here) removed by the parallel-axis theorem."""
+    disc = jnp.pi / 64 * (outer**4 - inner**4)
+    own, hole = jnp.pi / 64 * dt**4, jnp.pi / 4 * dt**2
+    I_x = disc - jnp.sum(through * (own + hole * r[:, 1] ** 2))
+    I_y = disc - jnp.sum(through * (own + hole * r[:, 0] ** 2))
+    return I_x, I_y
+
+
 def section_area(sec: Section, n_channels):
     """Area of a section's body [m^2]: outer disc minus central channel and ``n_channels`` tendon
     channels (the tendons that pass through it)."""
-    return jnp.pi / 4 * (sec.outer_diameter**2 - sec.inner_diameter**2 - n_channels * sec.tendon_channel_diameter**2)
+    return channelled_area(sec.outer_diameter, sec.inner_diameter, sec.tendon_channel_diameter, n_channels)
 
 
 def _keys(where: str, table, required=(), optional=()) -> None:

@@ -36,10 +36,10 @@ import numpy as np
 from jax import lax
 
 from .checks import check_range, is_concrete
-from .description import GeneralRobot, section_area
+from .description import GeneralRobot, channelled_second_moments, section_area
 from .inputs import GeneralActuation, Loads
 from .integrate import rk4
-from .segments import E3, Segment, State, rod_force, strains
+from .segments import E3, Segment, State, rod_force, strains, tendon_pb
 from .so3 import hat, orthonormalize
 
 
@@ -122,11 +122,7 @@ def interval_parameters(robot: GeneralRobot, act: GeneralActuation, k, rank: Ran
     for start, sec in zip(starts, robot.sections, strict=True):
         through = (start < anchors).astype(float)  # tendons whose channels cut this section
         A = section_area(sec, jnp.sum(through))
-        disc = jnp.pi / 64 * (sec.outer_diameter**4 - sec.inner_diameter**4)
-        dt = sec.tendon_channel_diameter
-        own, hole = jnp.pi / 64 * dt**4, jnp.pi / 4 * dt**2
-        I_x = disc - jnp.sum(through * (own + hole * r[:, 1] ** 2))
-        I_y = disc - jnp.sum(through * (own + hole * r[:, 0] ** 2))
+        I_x, I_y = channelled_second_moments(sec.outer_diameter, sec.inner_diameter, sec.tendon_channel_diameter, r, through)
         G = sec.E / (2 * (1 + sec.nu))
         props.append(jnp.stack([G * A, G * A, sec.E * A, sec.E * I_x, sec.E * I_y, G * (I_x + I_y), sec.density * A]))
     p = jnp.stack(props)[idx]
@@ -306,8 +302,7 @@ def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solv
             dy = State(dp, y.R @ hat(u), -P.rho * gravity - f_d, -jnp.cross(dp, y.N))
             dl = None
             if lengths:
-                pb = jnp.cross(u[None], seg.r) + v[None] + (0.0 if seg.dr is None else seg.dr)
-                dl = P.present * jnp.linalg.norm(pb, axis=-1)
+                dl = P.present * jnp.linalg.norm(tendon_pb(seg, v, u), axis=-1)
             return Carry(dy, None if c.s is None else jnp.ones_like(c.s), dl)
 
         return f

@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .checks import UnitWarning, as_array, check_range, fmt, interval, is_concrete, plausibility_note, read_toml, warn_user
+from .description import GeneralRobot, channelled_area, channelled_second_moments, from_paper
 from .tree import pytree, set_fields, static
 
 SCALAR_FIELDS = (
@@ -194,8 +195,6 @@ class Robot:
         path = Path(path)
         data = read_toml(path, "robot file")
         if "sections" in data:
-            from .description import GeneralRobot
-
             return GeneralRobot.from_table(data, path)
         data = data.get("robot", data)
         known = {f.name for f in dataclasses.fields(cls)}
@@ -220,8 +219,6 @@ class Robot:
         depth is the actuation's insertion): ``tdct.solve`` gives the same results for both
         (within 1e-12 relative). ``Robot`` keeps its own fields and solver path, used by
         calibration, sweeps, the CLI and the paper studies."""
-        from .description import from_paper
-
         return from_paper(self)
 
     @property
@@ -237,20 +234,14 @@ class Robot:
     @property
     def area_silicone(self):
         """Silicone area A1: outer disc minus tube channel and tendon channels [m^2]."""
-        holes = self.n_tendons * self.tendon_channel_diameter**2
-        return jnp.pi / 4 * (self.outer_diameter**2 - self.channel_diameter**2 - holes)
+        return channelled_area(self.outer_diameter, self.channel_diameter, self.tendon_channel_diameter, self.n_tendons)
 
     @property
     def second_moments_silicone(self):
         """(I_x, I_y) of the silicone section, tendon channels by the parallel-axis theorem [m^4]."""
-        disc = jnp.pi / 64 * (self.outer_diameter**4 - self.channel_diameter**4)
-        dt = self.tendon_channel_diameter
-        r = self.tendon_positions
-        own = jnp.pi / 64 * dt**4
-        hole_area = jnp.pi / 4 * dt**2
-        I_x = disc - jnp.sum(own + hole_area * r[:, 1] ** 2)
-        I_y = disc - jnp.sum(own + hole_area * r[:, 0] ** 2)
-        return I_x, I_y
+        return channelled_second_moments(
+            self.outer_diameter, self.channel_diameter, self.tendon_channel_diameter, self.tendon_positions, 1.0
+        )
 
     @property
     def area_tube(self):

@@ -84,11 +84,11 @@ def tendon_tangents(seg: Segment, v, u):
     """Body-frame unit tangents t_t of the tendons, (n_t, 3)."""
     if not seg.tilt:
         return jnp.broadcast_to(E3, seg.r.shape)
-    pb = _tendon_tangent(seg, v, u)
+    pb = tendon_pb(seg, v, u)
     return pb / jnp.linalg.norm(pb, axis=-1, keepdims=True)
 
 
-def _tendon_tangent(seg: Segment, v, u):
+def tendon_pb(seg: Segment, v, u):
     """Unnormalised body-frame tendon tangents pb_t = u x r_t + r_t' + v, (n_t, 3)."""
     pb = jnp.cross(u[None], seg.r) + v[None]
     return pb if seg.dr is None else pb + seg.dr
@@ -120,7 +120,7 @@ def _residual_and_jacobian(seg: Segment, w, bf, bm):
     """
     v, u = w[:3], w[3:]
     tau = seg.tau
-    pb = _tendon_tangent(seg, v, u)
+    pb = tendon_pb(seg, v, u)
     norm = jnp.linalg.norm(pb, axis=-1)
     t = pb / norm[:, None]
     F = jnp.concatenate([seg.K_se * (v - E3) + tau @ t - bf, seg.K_bt * u + tau @ jnp.cross(seg.r, t) - bm])
