@@ -149,14 +149,8 @@ def plot_robot(sol, robot, act=None, load=None, path: str | Path | None = None, 
     paths = [p + 1e3 * np.einsum("nij,nj->ni", R, np.broadcast_to(t.position(s)[0], p.shape)) for t in robot.tendons]
     reach = max([float(t.offset) for t in robot.tendons] + [float(sec.outer_diameter) / 2 for sec in robot.sections])
     circle = np.linspace(0, 2 * np.pi, 41)
-    disks = [
-        p[_node(s, float(m.s))]
-        + 1e3
-        * reach
-        * 1.3
-        * np.einsum("ij,nj->ni", R[_node(s, float(m.s))], np.stack([np.cos(circle), np.sin(circle), 0 * circle], 1))
-        for m in robot.masses
-    ]
+    ring = 1.3e3 * reach * np.stack([np.cos(circle), np.sin(circle), 0 * circle], 1)  # a disk's rim, body frame [mm]
+    disks = [p[k] + ring @ R[k].T for k in (_node(s, float(m.s)) for m in robot.masses)]
     forces = [(float(x), np.asarray(f)) for x, f in zip(np.asarray(load.point_s), np.asarray(load.point_force), strict=True)]
     forces += [(length, np.asarray(load.tip_force))] if np.any(np.asarray(load.tip_force)) else []
     biggest = max([np.linalg.norm(f) for _, f in forces], default=0.0)
