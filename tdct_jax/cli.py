@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import json
 import math
 import os
@@ -16,13 +15,15 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from . import __version__, status
+from . import __version__, fields, general, status
 from .checks import UnitWarning, check_output, interval, target_note
+from .description import GeneralRobot
 from .ik import MAX_STEPS as IK_MAX_STEPS
+from .inputs import GeneralActuation, Loads
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .mechanics import compliance, compliance_ellipsoid
 from .options import MAX_ITER, STEPS, SolverOptions
-from .robot import SCALAR_FIELDS, CalibrationWarning, Robot
+from .robot import CalibrationWarning, Robot
 from .solve import check_solution, solve
 from .status import ConvergenceError
 
@@ -65,8 +66,8 @@ def use_every_cpu_core() -> bool:
     return True
 
 
-NUMBER_LIST = re.compile(r"^-(\d|\.\d)[\d.eE+\-]*(,\s*-?(\d|\.\d)[\d.eE+\-]*)*$")
-"""A token that starts with '-' but is a (list of) number(s), never a flag."""
+NUMBER_LIST = re.compile(r"^-(\d|\.\d)[\d.eE+\-:]*(,\s*-?(\d|\.\d)[\d.eE+\-:]*)*$")
+"""A token that starts with '-' but is a (list of) number(s) (or S:F pairs), never a flag."""
 
 
 def _negative_values_attached(argv: list[str]) -> list[str]:
@@ -108,11 +109,37 @@ def _finite(text: str) -> float:
 def _assignment(text: str):
     name, sep, value = text.partition("=")
     if not sep:
-        raise argparse.ArgumentTypeError(f"expected FIELD=VALUE (a Robot field in SI units), got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected FIELD=VALUE (a robot field in SI units), got {text!r}")
     try:
         return name.strip(), float(value)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{name.strip()}: expected a number, got {value!r}") from None
+
+
+def _displacements(text: str):
+    """``2:1.5,5:-0.5`` as ((2, 1.5), (5, -0.5)): tendon numbers (from 1) and displacements [mm]."""
+    pairs = []
+    for item in text.split(","):
+        number, sep, value = item.partition(":")
+        try:
+            pair = (int(number), float(value))
+        except ValueError:
+            pair = None
+        if not sep or pair is None or not math.isfinite(pair[1]):
+            raise argparse.ArgumentTypeError(
+                f"expected TENDON:MM pairs, comma-separated (tendons numbered from 1, e.g. 1:2.5,4:-1), got {text!r}"
+            )
+        pairs.append(pair)
+    return tuple(pairs)
+
+
+def _point_load(text: str):
+    """``300:0,-0.1,0`` as (300.0, (0.0, -0.1, 0.0)): arc length [mm] and world force [N]."""
+    where, sep, force = text.partition(":")
+    try:
+        return _finite(where), _floats(3)(force)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected S_MM:FX,FY,FZ (arc length in mm, force in N), got {text!r}") from None
 
 
 def check_flag(flag: str, value, lo=0.0, hi=math.inf, unit="", *, lo_open=False) -> None:
@@ -142,14 +169,19 @@ def _parser() -> argparse.ArgumentParser:
         help=f"do not read or write the compilation cache (default: {COMPILE_CACHE_ENV} or ~/.cache/tdct_jax/xla)",
     )
     described = argparse.ArgumentParser(add_help=False, parents=[cached])
-    described.add_argument("--robot", metavar="robot.toml", help="TOML file of Robot fields in SI units")
+    described.add_argument(
+        "--robot",
+        metavar="robot.toml",
+        help="robot file, SI units: Robot fields, or any robot described by [[sections]] (docs/robot-file.md)",
+    )
     described.add_argument(
         "--set",
         type=_assignment,
         action="append",
         default=[],
         metavar="FIELD=VALUE",
-        help="override one Robot field, SI units (e.g. E_silicone=1.1e6); repeatable, applied after --robot",
+        help="override one robot field, SI units (E_silicone=1.1e6; for a robot file with [[sections]]: "
+        "sections[*].E=60e9, tendons[0].offset=0.012); repeatable, applied after --robot",
     )
     described.add_argument("--steps", type=int, default=STEPS, help=f"RK4 steps per segment (default {STEPS})")
     described.add_argument(
@@ -159,14 +191,43 @@ def _parser() -> argparse.ArgumentParser:
 
     common = argparse.ArgumentParser(add_help=False, parents=[described])
     common.add_argument(
-        "--tensions", type=_floats(), metavar="T1,T2,...", help="tendon tensions in N, tendon 1 first (default all 0)"
+        "--tensions",
+        type=_floats(),
+        metavar="T1,T2,...",
+        help="tendon tensions in N, one per tendon of the robot, tendon 1 first (default all 0); "
+        "for a displacement-driven tendon, where the search for its tension starts",
     )
-    common.add_argument("--insertion-mm", type=_finite, default=0.0, help="Nitinol tube insertion depth in mm (default 0)")
+    common.add_argument(
+        "--displacements-mm",
+        type=_displacements,
+        metavar="TENDON:MM,...",
+        help="drive these tendons by displacement: the length pulled at the base in mm, tendons numbered from 1 "
+        "(e.g. 1:2.5,4:-1); each must be less than the tendon's length from the base to its anchor; "
+        "a tendon that would have to push goes slack",
+    )
+    insertion = common.add_mutually_exclusive_group()
+    insertion.add_argument(
+        "--insertion-mm", type=_finite, help="tube insertion depth in mm, for a robot with one tube (default 0)"
+    )
+    insertion.add_argument(
+        "--insertions-mm",
+        type=_floats(),
+        metavar="D1,D2,...",
+        help="insertion depth of each tube in mm, tube 1 first (default all 0)",
+    )
     tip = common.add_mutually_exclusive_group()
     tip.add_argument("--tip-mass-g", type=_finite, help="tip mass in grams, hanging under standard gravity (-y)")
     tip.add_argument("--tip-force", type=_floats(3), metavar="FX,FY,FZ", help="tip force in N, world frame")
     common.add_argument(
         "--tip-moment", type=_floats(3), default=(0.0, 0.0, 0.0), metavar="MX,MY,MZ", help="tip moment in N m, world frame"
+    )
+    common.add_argument(
+        "--point-load",
+        type=_point_load,
+        action="append",
+        default=[],
+        metavar="S_MM:FX,FY,FZ",
+        help="a force in N, world frame, at arc length S_MM in mm from the base, in [0, L]; repeatable",
     )
     common.add_argument("--json", action="store_true", help="print one JSON object instead of text")
 
@@ -307,14 +368,17 @@ def _check_output(dest: str, flag: str, path) -> None:
     check_output(flag, path, suffixes=formats, kind="an image format matplotlib writes")
 
 
-def _robot(args) -> Robot:
+def _robot(args, general: bool = False) -> Robot | GeneralRobot:
+    """The robot of --robot (default: the paper's) with the --set fields replaced (fields.py names);
+    a robot file with [[sections]] (a GeneralRobot) only for the verbs that take one (``general``)."""
     robot = Robot.from_toml(args.robot) if args.robot else Robot()
-    fields = dict(getattr(args, "set", []))
-    unknown = sorted(set(fields) - set(SCALAR_FIELDS))
-    if unknown:
-        raise ValueError(f"--set: unknown Robot field(s) {unknown}; allowed: {list(SCALAR_FIELDS)}")
+    if isinstance(robot, GeneralRobot) and not general:
+        raise ValueError(
+            f"--robot {args.robot}: tdct {args.verb} takes the paper's robot only so far (a file of Robot fields); "
+            "a robot file with [[sections]] works with tdct solve and tdct compliance"
+        )
     try:
-        return dataclasses.replace(robot, **fields) if fields else robot
+        return fields.replace(robot, dict(getattr(args, "set", [])))
     except ValueError as e:
         raise ValueError(f"--set: {e}") from None
 
@@ -335,29 +399,82 @@ def _check_tensions(flag: str, tensions, robot: Robot) -> None:
 
 
 def _inputs(args):
-    """Robot, actuation, load and solve options from the shared flags, checked in the units typed."""
-    robot = _robot(args)
+    """Robot, actuation, load and solve options from the shared flags, checked in the units typed.
+    The paper's Robot becomes its GeneralRobot (``Robot.to_general``) for the flags only a
+    GeneralRobot takes (--displacements-mm, --point-load)."""
+    robot = _robot(args, general=True)
     solver = _solver(args)
-    tensions = args.tensions if args.tensions is not None else (0.0,) * robot.n_tendons
+    if isinstance(robot, Robot) and (args.displacements_mm or args.point_load):
+        robot = robot.to_general()
+    n_t, length_mm = robot.n_tendons, 1e3 * float(robot.length)
+    if args.tensions is not None and n_t == 0:
+        raise ValueError(f"--tensions {','.join(f'{t:g}' for t in args.tensions)}: the robot has no tendons; leave it out")
+    tensions = args.tensions if args.tensions is not None else (0.0,) * n_t
     _check_tensions("--tensions", tensions, robot)
-    check_flag("--insertion-mm", args.insertion_mm, 0.0, 1e3 * float(robot.length), " mm")
-    act = Actuation(tensions=tensions, insertion=args.insertion_mm * 1e-3)
+    n_tubes = robot.n_tubes if isinstance(robot, GeneralRobot) else 1
+    if args.insertions_mm is not None:
+        flag, depths = "--insertions-mm", args.insertions_mm
+        check_count(flag, depths, n_tubes, f"the robot has {n_tubes} tubes, one depth each")
+    else:
+        flag, depths = "--insertion-mm", (0.0,) * n_tubes if args.insertion_mm is None else (args.insertion_mm,)
+        if args.insertion_mm is not None and n_tubes != 1:
+            raise ValueError(
+                f"--insertion-mm {args.insertion_mm:g}: the robot has {n_tubes} tubes; give --insertions-mm, one depth each"
+            )
+    check_flag(flag, depths, 0.0, length_mm, " mm")
     if args.tip_mass_g is not None:
         check_flag("--tip-mass-g", args.tip_mass_g, 0.0, unit=" g")
-        load = TipLoad(force=TipLoad.from_mass(args.tip_mass_g * 1e-3).force, moment=args.tip_moment)
+        tip_force = TipLoad.from_mass(args.tip_mass_g * 1e-3).force
     else:
-        load = TipLoad(force=args.tip_force or (0.0, 0.0, 0.0), moment=args.tip_moment)
-    return robot, act, load, dict(gravity=_gravity(args), solver=solver)
+        tip_force = args.tip_force or (0.0, 0.0, 0.0)
+    options = dict(gravity=_gravity(args), solver=solver)
+    if isinstance(robot, Robot):
+        return robot, Actuation(tensions, depths[0] * 1e-3), TipLoad(tip_force, args.tip_moment), options
+    pulled = args.displacements_mm or ()
+    _check_displacements(pulled, robot)
+    for s_mm, force in args.point_load:
+        where = f"--point-load {s_mm:g}:{','.join(f'{f:g}' for f in force)}: arc length"
+        check_flag(where, s_mm, 0.0, length_mm, " mm")
+    act = GeneralActuation(tensions, [d * 1e-3 for d in depths], [d * 1e-3 for _, d in pulled], [i - 1 for i, _ in pulled])
+    point_s = [s * 1e-3 for s, _ in args.point_load]
+    load = Loads(tip_force, args.tip_moment, point_s, [f for _, f in args.point_load] if point_s else None)
+    return robot, act, load, options
 
 
-def _conditions(args, act: Actuation) -> str:
+def _check_displacements(pulled, robot: GeneralRobot) -> None:
+    """--displacements-mm: known tendons, each once, each less than its length from the base to its
+    anchor in the straight robot (``general.check_arguments`` checks the same in SI units)."""
+    if not pulled:
+        return
+    typed = "--displacements-mm " + ",".join(f"{i}:{d:g}" for i, d in pulled)
+    numbers = [i for i, _ in pulled]
+    if robot.n_tendons == 0:
+        raise ValueError(f"{typed}: the robot has no tendons")
+    if not all(1 <= i <= robot.n_tendons for i in numbers) or len(set(numbers)) != len(numbers):
+        raise ValueError(f"{typed}: tendon numbers, each once, 1 to {robot.n_tendons}")
+    reach = 1e3 * np.asarray(general.rest_lengths(robot))
+    for i, d in pulled:
+        if not d < reach[i - 1]:
+            raise ValueError(
+                f"{typed}: tendon {i}'s {d:g} mm is outside the allowed range {interval(-math.inf, reach[i - 1], True, True)} mm "
+                "(less than its length from the base to its anchor in the straight robot)"
+            )
+
+
+def _conditions(args, act) -> str:
     """The inputs as typed, for figure titles."""
-    text = f"tensions {', '.join(f'{t:g}' for t in np.asarray(act.tensions))} N, insertion {args.insertion_mm:g} mm"
+    parts = [f"tensions {', '.join(f'{t:g}' for t in np.asarray(act.tensions))} N"] if np.size(act.tensions) else []
+    parts += [f"tendon {i} pulled {d:g} mm" for i, d in args.displacements_mm or ()]
+    depths = args.insertions_mm or (() if args.insertion_mm is None else (args.insertion_mm,))
+    if depths:
+        parts.append(f"insertion {', '.join(f'{d:g}' for d in depths)} mm")
     if args.tip_mass_g is not None:
-        return f"{text}, tip mass {args.tip_mass_g:g} g"
+        parts.append(f"tip mass {args.tip_mass_g:g} g")
     if args.tip_force is not None:
-        return f"{text}, tip force ({', '.join(f'{f:g}' for f in args.tip_force)}) N"
-    return text
+        parts.append(f"tip force ({', '.join(f'{f:g}' for f in args.tip_force)}) N")
+    if args.point_load:
+        parts.append(f"{len(args.point_load)} point load(s)")
+    return ", ".join(parts) or "no load"
 
 
 def _compliance_command(args) -> int:
@@ -382,7 +499,7 @@ def _compliance_command(args) -> int:
     if args.plot:
         from .plotting import plot_compliance_ellipses
 
-        plot_compliance_ellipses({f"insertion {args.insertion_mm:g} mm": CM}, args.plot, title=_conditions(args, act))
+        plot_compliance_ellipses({"tip compliance": CM}, args.plot, title=_conditions(args, act))
     return 0
 
 
@@ -392,6 +509,13 @@ def _solve_command(args) -> int:
     tip_mm = np.asarray(sol.tip_position) * 1e3
     angle = float(np.degrees(sol.tip_angle))
     converged, res, iters = bool(sol.converged), float(sol.residual_norm), int(sol.iterations)
+    tendons = {}
+    if isinstance(robot, GeneralRobot):
+        tendons = dict(
+            tensions_N=np.asarray(sol.tensions).tolist(),
+            displacements_mm=(np.asarray(sol.displacements) * 1e3).tolist(),
+            slack=np.asarray(sol.slack).tolist(),
+        )
     if args.json:
         shape = {"s_mm": (np.asarray(sol.s) * 1e3).tolist(), "position_mm": (np.asarray(sol.position) * 1e3).tolist()}
         out = dict(
@@ -400,6 +524,7 @@ def _solve_command(args) -> int:
             converged=converged,
             residual_norm=res,
             iterations=iters,
+            **tendons,
             shape=shape,
         )
         print(json.dumps(out))
@@ -407,13 +532,21 @@ def _solve_command(args) -> int:
         print(f"tip position [mm]: x = {tip_mm[0]:.3f}, y = {tip_mm[1]:.3f}, z = {tip_mm[2]:.3f}")
         print(f"tip angle [deg]:   {angle:.3f}")
         print(f"converged:         {'yes' if converged else 'NO'} (scaled residual {res:.2e}, {iters} Newton iterations)")
+        if tendons:
+            slack = [str(i + 1) for i, s in enumerate(tendons["slack"]) if s]
+            print(f"tensions [N]:      {', '.join(f'{t:.4f}' for t in tendons['tensions_N'])}")
+            print(f"displacements [mm]: {', '.join(f'{d:.4f}' for d in tendons['displacements_mm'])}")
+            print(f"slack tendons:     {', '.join(slack) or 'none'}")
     if args.csv:
         table = np.column_stack([np.asarray(sol.s), np.asarray(sol.position)]) * 1e3
         np.savetxt(args.csv, table, delimiter=",", header="s_mm,x_mm,y_mm,z_mm", comments="", fmt="%.9g")
     if args.plot:
-        from .plotting import plot_shape
+        from .plotting import plot_robot, plot_shape
 
-        plot_shape(sol, act.insertion, args.plot, title=_conditions(args, act))
+        if isinstance(robot, GeneralRobot):
+            plot_robot(sol, robot, act, load, args.plot, title=_conditions(args, act))
+        else:
+            plot_shape(sol, act.insertion, args.plot, title=_conditions(args, act))
     check_solution(sol, options["solver"], True)
     return 0
 

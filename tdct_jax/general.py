@@ -36,7 +36,7 @@ import numpy as np
 from jax import lax
 
 from .checks import check_range, is_concrete
-from .description import GeneralRobot, channelled_second_moments, section_area
+from .description import GeneralRobot, channelled_second_moments, is_concrete_tree, section_area
 from .inputs import GeneralActuation, Loads
 from .integrate import rk4
 from .segments import E3, Segment, State, rod_force, strains, tendon_pb
@@ -380,3 +380,15 @@ def check_arguments(robot: GeneralRobot, act: GeneralActuation, load: Loads, sol
     for i, t in enumerate(robot.tendons):
         if t.max_tension is not None and is_concrete(act.tensions) and is_concrete(t.max_tension):
             check_range(f"tensions[{i}]", act.tensions[i], 0.0, float(t.max_tension), unit=f" N (tendons[{i}].max_tension)")
+    if act.driven and is_concrete_tree(robot):
+        reach = np.asarray(rest_lengths(robot))
+        for k, i in enumerate(act.driven):
+            check_range(
+                f"displacements[{k}] (tendons[{i}])",
+                act.displacements[k],
+                -np.inf,
+                float(reach[i]),
+                lo_open=True,
+                hi_open=True,
+                unit=" m (below the tendon's rest length from the base to its anchor in the straight robot)",
+            )

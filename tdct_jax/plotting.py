@@ -121,6 +121,99 @@ def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, 
     return _finish(fig, path)
 
 
+@_styled
+def plot_robot(sol, robot, act=None, load=None, path: str | Path | None = None, title: str | None = None):
+    """Side view (world z-y), top view (z-x) and 3D view of a solved ``GeneralRobot``, in mm: the
+    body coloured by section, each tube's insertion shaded, every tendon along the body from the
+    base to its anchor (a dot, its number beside it in 3D, in its anchor section's colour), point
+    masses as disks across the body, point loads and the tip force as arrows.
+
+    Args:
+        sol: a single (unbatched) GeneralSolution of ``robot``.
+        robot: the GeneralRobot solved.
+        act, load: its GeneralActuation (tube depths) and Loads (or TipLoad); None: none.
+        path: where to save a PNG; the figure is returned either way.
+        title: figure title.
+    """
+    from .inputs import GeneralActuation, Loads
+
+    plt = _pyplot()
+    act, load = GeneralActuation.of(act, robot.n_tubes), Loads.of(load)
+    s, p, R = np.asarray(sol.s), np.asarray(sol.position) * 1e3, np.asarray(sol.rotation)
+    length = float(robot.length)
+    ends = [float(sec.end) for sec in robot.sections]
+    starts = [0.0, *ends[:-1]]
+    colours = [plt.cm.tab10(j % 10) for j in range(len(ends))]
+    anchors = [length if t.end is None else float(t.end) for t in robot.tendons]
+    at = [int(np.searchsorted(ends, a - 1e-12)) for a in anchors]  # each anchor's section
+    paths = [p + 1e3 * np.einsum("nij,nj->ni", R, np.broadcast_to(t.position(s)[0], p.shape)) for t in robot.tendons]
+    reach = max([float(t.offset) for t in robot.tendons] + [float(sec.outer_diameter) / 2 for sec in robot.sections])
+    circle = np.linspace(0, 2 * np.pi, 41)
+    ring = 1.3e3 * reach * np.stack([np.cos(circle), np.sin(circle), 0 * circle], 1)  # a disk's rim, body frame [mm]
+    disks = [p[k] + ring @ R[k].T for k in (_node(s, float(m.s)) for m in robot.masses)]
+    forces = [(float(x), np.asarray(f)) for x, f in zip(np.asarray(load.point_s), np.asarray(load.point_force), strict=True)]
+    forces += [(length, np.asarray(load.tip_force))] if np.any(np.asarray(load.tip_force)) else []
+    biggest = max([np.linalg.norm(f) for _, f in forces], default=0.0)
+    arrows = [(p[_node(s, x)], 0.2 * length * 1e3 * f / biggest) for x, f in forces if np.linalg.norm(f) > 0]
+
+    fig = plt.figure(figsize=(17, 5.6), layout="constrained")
+    views = [fig.add_subplot(1, 3, 1), fig.add_subplot(1, 3, 2), fig.add_subplot(1, 3, 3, projection="3d")]
+    for ax, cols in zip(views, ((2, 1), (2, 0), (0, 2, 1)), strict=True):
+        xyz = functools.partial(_columns, cols=cols)
+        for j, d in enumerate(np.asarray(act.insertions)):
+            inside = s <= d + 1e-12
+            if d > 0:
+                label = f"tube {j + 1} inserted {d * 1e3:g} mm"
+                ax.plot(*xyz(p[inside]), color="0.3", lw=10 + 4 * j, alpha=0.25, solid_capstyle="butt", label=label)
+        for j, (a, b) in enumerate(zip(starts, ends, strict=True)):
+            piece = (s >= a - 1e-12) & (s <= b + 1e-12)
+            ax.plot(*xyz(p[piece]), color=colours[j], lw=3.5, label=f"section {j + 1}: {a * 1e3:g}-{b * 1e3:g} mm")
+        for i, (q, a) in enumerate(zip(paths, anchors, strict=True)):
+            on = s <= a + 1e-12
+            ax.plot(*xyz(q[on]), color=colours[at[i]], lw=1.1, alpha=0.8)
+            ax.plot(*xyz(q[on][-1]), "o", color=colours[at[i]], mec="black", ms=5)
+            if len(cols) == 3:
+                ax.text(*xyz(q[on][-1]), f" {i + 1}", fontsize="small")
+        for disk in disks:
+            ax.plot(*xyz(disk), color="saddlebrown", lw=2)
+        for base, vec in arrows:
+            if len(cols) == 3:
+                ax.quiver(*xyz(base), *xyz(vec), color="tab:red", lw=2, arrow_length_ratio=0.2)
+            else:
+                ax.annotate("", xy=xyz(base + vec), xytext=xyz(base), arrowprops=dict(arrowstyle="->", color="tab:red", lw=2))
+    side, top, ax3 = views
+    if robot.tendons:
+        side.plot([], [], "-o", color="0.4", lw=1.1, ms=5, mec="black", label="tendons, to their anchors (numbered in 3D)")
+    if disks:
+        side.plot([], [], color="saddlebrown", lw=2, label="point masses")
+    if arrows:
+        side.plot([], [], color="tab:red", lw=2, label=f"forces: point loads, tip (longest {biggest:.3g} N)")
+    every = np.concatenate([p, *paths, *disks, *(np.stack([b, b + v]) for b, v in arrows)])
+    for ax, (h, v), name in ((side, (2, 1), "side view"), (top, (2, 0), "top view")):
+        ax.set_xlabel(f"{'xyz'[h]} [mm]")
+        ax.set_ylabel(f"{'xyz'[v]} [mm]")
+        ax.update_datalim(every[:, [h, v]])
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(name)
+    side.set_title(f"side view: tip angle {np.degrees(float(sol.tip_angle)):.1f} deg")
+    _equal_3d(ax3, every)
+    ax3.set_title("3D (gravity along -y)")
+    fig.legend(*side.get_legend_handles_labels(), loc="outside lower center", ncols=4, fontsize="small")
+    if title:
+        fig.suptitle(title)
+    return _finish(fig, path)
+
+
+def _columns(q, cols):
+    """The coordinates ``cols`` of points q (..., 3), as a list of arrays (one per plot axis)."""
+    return [q[..., c] for c in cols]
+
+
+def _node(s, x) -> int:
+    """The node nearest arc length x (breakpoints are nodes)."""
+    return int(np.argmin(np.abs(s - x)))
+
+
 def _equal_3d(ax3, p):
     """Labels a 3D axes drawn as (x, z, y) [mm] and gives it equal spans around the points (k, 3)."""
     ax3.set_xlabel("x [mm]")
