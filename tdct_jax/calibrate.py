@@ -1,9 +1,11 @@
-"""Calibration of Robot fields from measured shapes (paper Sec. III.B), and synthetic shape data.
+"""Calibration of robot fields from measured shapes (paper Sec. III.B), and synthetic shape data.
 
 The paper fits the silicone's Young's modulus by minimising the error between five measured shapes
-and the model. Here any subset of the scalar Robot fields is fitted to any number of experiments
-by Levenberg-Marquardt on the point-wise shape residuals, with the Jacobian exact (forward-mode
-autodiff through the implicitly differentiated shooting solution, vmapped over experiments).
+and the model. Here any subset of a robot's scalar fields (``fields.py``: the paper Robot's
+"E_silicone", ..., a GeneralRobot's "sections[*].E", "tendons[0].offset", ...) is fitted to any
+number of experiments by Levenberg-Marquardt on the point-wise shape residuals, with the Jacobian
+exact (forward-mode autodiff through the implicitly differentiated shooting solution, vmapped over
+experiments).
 """
 
 from __future__ import annotations
@@ -19,17 +21,17 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from . import status
+from . import fields, general, status
 from .checks import check_integer
 from .data import Experiment, stack
+from .description import GeneralRobot
+from .inputs import GeneralActuation, Loads
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
-from .mechanics import shape_errors
+from .mechanics import check_params, shape_errors
 from .options import DEFAULT_SOLVER, SolverOptions
-from .robot import SCALAR_FIELDS, Robot
+from .robot import Robot
 from .solve import Solution, check_inputs, check_solution, solve
 
-LINEAR_FIELDS = ("nu_silicone", "nu_tube")
-"""Fields fitted as they are (they may be zero or negative); every other field is fitted in log space."""
 FBG_POINTS = 33
 """Points per synthetic shape: every 5 mm along the paper's 160 mm robot."""
 
@@ -91,7 +93,8 @@ def levenberg_marquardt(
 
 
 def _values(x, params) -> dict:
-    return {p: x[i] if p in LINEAR_FIELDS else jnp.exp(x[i]) for i, p in enumerate(params)}
+    """Field values from the fitted coordinates: as they are where ``fields.is_linear``, else exp."""
+    return {p: x[i] if fields.is_linear(p) else jnp.exp(x[i]) for i, p in enumerate(params)}
 
 
 def _deviations(robot, batch: Experiment, gravity, solver):
@@ -111,7 +114,7 @@ def _fit_step(x, robot, batch, gravity, solver, params):
     """Weighted residuals (E n 3,), their exact Jacobian in x, and per-experiment statistics."""
 
     def residual(x):
-        dev, stats = _deviations(dataclasses.replace(robot, **_values(x, params)), batch, gravity, solver)
+        dev, stats = _deviations(fields.replace(robot, _values(x, params)), batch, gravity, solver)
         r = (dev * jnp.sqrt(batch.weight)[..., None]).ravel()
         return r, (r, stats)
 
@@ -134,7 +137,7 @@ class Calibration:
     """Result of ``calibrate``; SI units (lengths in m) unless a name says otherwise.
 
     Attributes:
-        params: the fitted Robot fields.
+        params: the fitted fields' names (``fields.py``).
         initial, values: their starting and fitted values.
         std_errors: standard errors from the Gauss-Newton covariance s^2 (J^T J)^-1, with s^2 the
             residual variance per coordinate (delta method for fields fitted in log space).
@@ -156,7 +159,7 @@ class Calibration:
     values: dict
     std_errors: dict
     correlation: np.ndarray
-    robot: Robot
+    robot: Robot | GeneralRobot
     names: tuple
     rmse_before: np.ndarray
     rmse_after: np.ndarray
@@ -205,9 +208,10 @@ class Calibration:
     def summary(self) -> str:
         """A text table: fitted values with standard errors, then RMSE and tip error per experiment."""
         L = float(self.robot.length)
-        lines = [f"{'field':<18}{'initial':>13}{'fitted':>13}{'std error':>12}"]
+        w = max(18, *(len(p) + 2 for p in self.params))
+        lines = [f"{'field':<{w}}{'initial':>13}{'fitted':>13}{'std error':>12}"]
         for p in self.params:
-            lines.append(f"{p:<18}{self.initial[p]:>13.6g}{self.values[p]:>13.6g}{self.std_errors[p]:>12.3g}")
+            lines.append(f"{p:<{w}}{self.initial[p]:>13.6g}{self.values[p]:>13.6g}{self.std_errors[p]:>12.3g}")
         lines.append("")
         width = max(10, *(len(n) for n in self.names)) + 2
         lines.append(f"{'experiment':<{width}}{'RMSE before':>13}{'RMSE after':>20}{'tip error after':>22}")
@@ -226,7 +230,7 @@ class Calibration:
 
 
 def calibrate(
-    robot: Robot,
+    robot: Robot | GeneralRobot,
     experiments: Sequence[Experiment],
     params: Sequence[str] = ("E_silicone",),
     *,
@@ -237,17 +241,22 @@ def calibrate(
     progress: bool = True,
     throw: bool = True,
 ) -> Calibration:
-    """Fits Robot fields to measured shapes by Levenberg-Marquardt with exact Jacobians (Sec. III.B).
+    """Fits robot fields to measured shapes by Levenberg-Marquardt with exact Jacobians (Sec. III.B).
 
     The residuals are model minus measured positions at every measured point of every experiment
     (weighted by ``Experiment.weight``), so the cost is the sum of the experiments' squared RMSEs
-    (eq. 39) times their point counts. Positive fields are fitted in log space.
+    (eq. 39) times their point counts. Fields are fitted in log space unless ``fields.is_linear``
+    (Poisson ratios, tendon angles and twists are fitted as they are).
 
     Args:
-        robot: the robot with the starting values of ``params`` and every other field fixed.
-        experiments: measured shapes and their conditions (``tdct_jax.data.read_experiments``).
-        params: scalar Robot fields to fit, e.g. ("E_silicone", "tendon_offset"); a single
-            name may be given as a string ("E_silicone").
+        robot: the robot (a Robot or a GeneralRobot) with the starting values of ``params`` and
+            every other field fixed.
+        experiments: measured shapes and their conditions (``tdct_jax.data.read_experiments``);
+            for a GeneralRobot their actuations are GeneralActuations (or Actuations of its one
+            tube) and their loads Loads or TipLoads.
+        params: field names to fit (``fields.names``): for a Robot e.g. ("E_silicone",
+            "tendon_offset"), for a GeneralRobot e.g. ("sections[*].E", "tendons[0].offset"),
+            "[*]" fitting one value shared by every item; a single name may be given as a string.
         max_steps: most Levenberg-Marquardt trial steps (the fit's own limit).
         xtol: converged when the Gauss-Newton step changes no field by more than this (relative
             for log-space fields, absolute for Poisson ratios): the fit's own tolerance.
@@ -269,8 +278,7 @@ def calibrate(
     experiments = list(experiments)
     if not experiments or not all(isinstance(e, Experiment) for e in experiments):
         raise ValueError("experiments must be a non-empty sequence of tdct_jax.data.Experiment")
-    for e in experiments:
-        check_inputs(robot, e.act, e.load, solver)
+    experiments = _checked_experiments(robot, experiments, solver)
     max_steps = check_integer("max_steps", max_steps)
     batch, g = stack(experiments), gravity_vector(gravity)
 
@@ -289,8 +297,8 @@ def calibrate(
         bar.update(it - bar.n)
         bar.set_postfix_str(f"rms {np.sqrt(np.mean(r**2) * 3) * 1e3:.4f} mm, step {np.abs(step).max():.1e}")
 
-    x0 = np.array([float(getattr(robot, p)) for p in params])
-    x0 = np.where([p in LINEAR_FIELDS for p in params], x0, np.log(x0))
+    initial = {p: fields.value(robot, p) for p in params}
+    x0 = np.array([v if fields.is_linear(p) else np.log(v) for p, v in initial.items()])
     fit = levenberg_marquardt(evaluate, x0, max_steps=max_steps, xtol=xtol, callback=report)
     bar.close()
     before = first[0]
@@ -300,14 +308,14 @@ def calibrate(
     s2 = float(fit.residual @ fit.residual) / max(m - len(params), 1)
     cov = s2 * np.linalg.pinv(fit.jacobian.T @ fit.jacobian)
     se_x = np.sqrt(np.diag(cov))
-    scale = np.array([1.0 if p in LINEAR_FIELDS else values[p] for p in params])
+    scale = np.array([1.0 if fields.is_linear(p) else values[p] for p in params])
     result = Calibration(
         params=params,
-        initial={p: float(getattr(robot, p)) for p in params},
+        initial=initial,
         values=values,
         std_errors={p: float(scale[i] * se_x[i]) for i, p in enumerate(params)},
         correlation=cov / np.outer(se_x, se_x),
-        robot=dataclasses.replace(robot, **values),
+        robot=fields.replace(robot, values),
         names=tuple(e.name for e in experiments),
         rmse_before=before[0],
         rmse_after=fit.aux[0],
@@ -334,22 +342,36 @@ def _as_names(params) -> tuple:
         raise ValueError(f"params = {params!r} must be a Robot field name or a sequence of them") from None
 
 
-def _check_params(robot: Robot, params: tuple) -> None:
+def _check_params(robot: Robot | GeneralRobot, params: tuple) -> None:
     if not params or len(set(params)) != len(params):
         raise ValueError(f"params = {params!r} must name at least one Robot field, each once")
+    check_params(robot, params)
     for p in params:
-        if p not in SCALAR_FIELDS:
-            raise ValueError(f"params: {p!r} is not a scalar Robot field; allowed: {list(SCALAR_FIELDS)}")
-        if p not in LINEAR_FIELDS and not float(getattr(robot, p)) > 0:
-            raise ValueError(f"{p} = {float(getattr(robot, p)):g} must start positive: it is fitted in log space")
+        if not fields.is_linear(p) and not fields.value(robot, p) > 0:
+            raise ValueError(f"{p} = {fields.value(robot, p):g} must start positive: it is fitted in log space")
+
+
+def _checked_experiments(robot: Robot | GeneralRobot, experiments: list, solver: SolverOptions) -> list:
+    """The experiments checked against the robot; for a GeneralRobot with their actuations and
+    loads as GeneralActuation and Loads."""
+    if not isinstance(robot, GeneralRobot):
+        for e in experiments:
+            check_inputs(robot, e.act, e.load, solver)
+        return experiments
+    out = []
+    for e in experiments:
+        act, load = GeneralActuation.of(e.act, robot.n_tubes), Loads.of(e.load)
+        general.check_arguments(robot, act, load, solver)
+        out.append(dataclasses.replace(e, act=act, load=load))
+    return out
 
 
 def synthesize(
-    robot: Robot,
-    actuations: Sequence[Actuation],
+    robot: Robot | GeneralRobot,
+    actuations: Sequence[Actuation | GeneralActuation],
     *,
     tip_masses: Sequence[float] | None = None,
-    loads: Sequence[TipLoad] | None = None,
+    loads: Sequence[TipLoad | Loads] | None = None,
     n_points: int = FBG_POINTS,
     noise: float = 1e-4,
     seed: int = 0,
@@ -361,10 +383,11 @@ def synthesize(
     coordinate (numpy's default generator seeded with ``seed``).
 
     Args:
-        robot: the robot that "is measured".
-        actuations: one Actuation per experiment.
+        robot: the robot that "is measured" (a Robot or a GeneralRobot).
+        actuations: one Actuation (or, for a GeneralRobot, GeneralActuation) per experiment.
         tip_masses: tip mass per experiment [kg] (default none).
-        loads: further tip force and moment per experiment, world frame (default none).
+        loads: further loads per experiment, world frame (default none): TipLoads, or for a
+            GeneralRobot also Loads.
         n_points: points per shape (>= 2).
         noise: noise standard deviation [m] (>= 0).
         seed: random seed.
@@ -388,8 +411,7 @@ def synthesize(
         Experiment(s, np.zeros((n_points, 3)), a, ld, m, name=condition_name(a, m))
         for a, ld, m in zip(actuations, loads, tip_masses, strict=True)
     ]
-    for e in exact:
-        check_inputs(robot, e.act, e.load, solver)
+    exact = _checked_experiments(robot, exact, solver)
     dev, (_, _, _, sol) = _model_shapes(robot, stack(exact), gravity_vector(gravity), solver)
     names = ", ".join(e.name for e in exact)
     check_solution(sol, solver, True, what=f"synthesize (experiments {names})")
@@ -400,7 +422,16 @@ def synthesize(
     ]
 
 
-def condition_name(act: Actuation, tip_mass: float = 0.0) -> str:
-    """A file-name-safe label of a measurement condition, e.g. "t6-0-0-0N_d80mm_m20g"."""
-    tensions = "-".join(f"{t:g}" for t in np.asarray(act.tensions))
-    return f"t{tensions}N_d{float(act.insertion) * 1e3:g}mm_m{float(tip_mass) * 1e3:g}g"
+def condition_name(act: Actuation | GeneralActuation, tip_mass: float = 0.0) -> str:
+    """A file-name-safe label of a measurement condition, e.g. "t6-0-0-0N_d80mm_m20g"; a
+    GeneralActuation's lists every tube's depth and the driven tendons' displacements, e.g.
+    "t0-0.4N_x3-1mm_d80-20mm_m0g" (displacements 3 and 1 mm, tubes at 80 and 20 mm)."""
+
+    def joined(values, scale=1.0):
+        return "-".join(f"{v * scale:g}" for v in np.asarray(values, dtype=float))
+
+    if not isinstance(act, GeneralActuation):
+        return f"t{joined(act.tensions)}N_d{float(act.insertion) * 1e3:g}mm_m{float(tip_mass) * 1e3:g}g"
+    moved = f"_x{joined(act.displacements, 1e3)}mm" if act.driven else ""
+    depths = f"_d{joined(act.insertions, 1e3)}mm" if np.size(act.insertions) else ""
+    return f"t{joined(act.tensions)}N{moved}{depths}_m{float(tip_mass) * 1e3:g}g"

@@ -61,9 +61,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .checks import as_array, check_range, is_concrete
+from .inputs import GeneralActuation, Loads
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .robot import Robot
-from .tree import pytree, set_fields, static
+from .tree import pytree, set_fields, static, unchecked
 
 VERSION = "1"
 COLUMNS = ("s_mm", "x_mm", "y_mm", "z_mm")
@@ -99,8 +100,11 @@ class Experiment:
             >= 0 (a repeat is allowed only for padding points of weight 0, see ``stack``).
         position: measured positions [m], shape (n, 3), robot base frame = world frame (base at
             the origin, axis +z, gravity -y).
-        act: tendon tensions [N] and tube insertion [m].
+        act: tendon tensions [N] and tube insertion [m]: an Actuation, or for a GeneralRobot a
+            GeneralActuation (tensions, displacements, each tube's insertion; not in the shape-file
+            format yet).
         load: tip force [N] and moment [N m], world frame, without the tip mass; none by default.
+            A TipLoad, or for a GeneralRobot also Loads (point loads along the body).
         tip_mass: mass hanging at the tip [kg], >= 0.
         weight: weight of each point, shape (n,), >= 0; None means all ones (0 marks padding).
         name: a label (static: experiments with different names do not share one compilation).
@@ -108,22 +112,22 @@ class Experiment:
 
     s: object
     position: object
-    act: Actuation
-    load: TipLoad = dataclasses.field(default_factory=TipLoad)
+    act: Actuation | GeneralActuation
+    load: TipLoad | Loads = dataclasses.field(default_factory=TipLoad)
     tip_mass: float = 0.0
     weight: object = None
     name: str = static(default="")
 
     def __post_init__(self):
-        if not isinstance(self.act, Actuation):
-            raise TypeError(f"act must be a tdct.Actuation, got {type(self.act).__name__}")
+        if not isinstance(self.act, (Actuation, GeneralActuation)):
+            raise TypeError(f"act must be a tdct.Actuation or tdct.GeneralActuation, got {type(self.act).__name__}")
         load = TipLoad() if self.load is None else self.load
-        if not isinstance(load, TipLoad):
-            raise TypeError(f"load must be a tdct.TipLoad, got {type(load).__name__}")
+        if not isinstance(load, (TipLoad, Loads)):
+            raise TypeError(f"load must be a tdct.TipLoad or tdct.Loads, got {type(load).__name__}")
         if not isinstance(self.name, str):
             raise TypeError(f"name must be a str, got {type(self.name).__name__}")
         s = as_array("s", self.s)
-        batch = np.shape(self.act.insertion) if is_concrete(self.act.insertion) else None
+        batch = np.shape(self.act.tensions)[:-1] if is_concrete(self.act.tensions) else None
         if is_concrete(s) and batch is not None and (s.shape[:-1] != batch or s.shape[-1:] == (0,)):
             stacked = f" (a stack of {batch[0]}: {batch + ('n',)}, like its actuation)" if batch else ""
             raise ValueError(f"s must have shape (n,) with n >= 1, one arc length [m] per point{stacked}, got shape {s.shape}")
@@ -149,10 +153,13 @@ class Experiment:
     def n_points(self) -> int:
         return int(np.shape(self.s)[-1])
 
-    def tip_load(self, gravity=STANDARD_GRAVITY) -> TipLoad:
-        """The whole tip load: ``load`` plus the weight of ``tip_mass`` under ``gravity`` [m/s^2]
-        (None: no weight). Works under jit and vmap, and on a stack."""
+    def tip_load(self, gravity=STANDARD_GRAVITY) -> TipLoad | Loads:
+        """The whole load: ``load`` plus the weight of ``tip_mass`` under ``gravity`` [m/s^2]
+        (None: no weight) at the tip, of ``load``'s type. Works under jit and vmap, and on a stack."""
         weight = jnp.einsum("...,i->...i", jnp.asarray(self.tip_mass), gravity_vector(gravity))
+        if isinstance(self.load, Loads):
+            rest = {f.name: getattr(self.load, f.name) for f in dataclasses.fields(Loads) if f.name != "tip_force"}
+            return unchecked(Loads, tip_force=jnp.asarray(self.load.tip_force) + weight, **rest)
         return TipLoad(force=jnp.asarray(self.load.force) + weight, moment=self.load.moment)
 
 
@@ -389,7 +396,13 @@ def write_experiment(path: str | os.PathLike, exp: Experiment) -> Path:
     Raises:
         ValueError: a stacked experiment, weights other than 1 (the file has no weight column),
             or a name with line breaks or surrounding spaces.
+        TypeError: a GeneralActuation or Loads (the format holds an Actuation and a TipLoad).
     """
+    if not isinstance(exp.act, Actuation) or not isinstance(exp.load, TipLoad):
+        raise TypeError(
+            f"the shape file holds a tdct.Actuation and a tdct.TipLoad, got {type(exp.act).__name__} and "
+            f"{type(exp.load).__name__}: a general robot's experiments are not in the file format yet"
+        )
     path = Path(path)
     s = np.asarray(exp.s, dtype=float)
     if s.ndim != 1:
@@ -429,8 +442,13 @@ def stack(experiments: Sequence[Experiment]) -> Experiment:
     Shapes with fewer points are padded to the longest by repeating their last point with
     weight 0. The stack's ``name`` is "": the names stay with the caller's list, in order.
 
+    Experiments with a GeneralActuation stack into one (all of them, with the same ``driven``);
+    loads stack as TipLoads, or as Loads (TipLoads among them converted) with the same number of
+    point loads.
+
     Raises:
-        ValueError: no experiments, a stacked one among them, or different numbers of tendons.
+        ValueError: no experiments, a stacked one among them, different numbers of tendons, or
+            actuations or point loads that do not stack.
     """
     experiments = list(experiments)
     if not experiments:
@@ -443,6 +461,19 @@ def stack(experiments: Sequence[Experiment]) -> Experiment:
     if len(set(tendons)) > 1:
         counts = ", ".join(f"{label} has {t}" for label, t in zip(labels, tendons, strict=True))
         raise ValueError(f"cannot stack experiments with different numbers of tendons: {counts}")
+    general = [isinstance(e.act, GeneralActuation) for e in experiments]
+    if any(general) and (not all(general) or len({e.act.driven for e in experiments}) > 1):
+        kinds = ", ".join(f"{label} has {_actuation_kind(e.act)}" for label, e in zip(labels, experiments, strict=True))
+        raise ValueError(
+            f"cannot stack these actuations: all must be Actuations, or GeneralActuations with the same driven; {kinds}"
+        )
+    loads = [e.load for e in experiments]
+    if not all(isinstance(load, TipLoad) for load in loads):
+        loads = [Loads.of(load) for load in loads]
+        counts = [load.n_points for load in loads]
+        if len(set(counts)) > 1:
+            listed = ", ".join(f"{label} has {c}" for label, c in zip(labels, counts, strict=True))
+            raise ValueError(f"cannot stack experiments with different numbers of point loads: {listed}")
     n = max(e.n_points for e in experiments)
 
     def pad(x, fill=None):
@@ -453,12 +484,27 @@ def stack(experiments: Sequence[Experiment]) -> Experiment:
     def stacked(get):
         return np.stack([np.asarray(get(e), dtype=float) for e in experiments])
 
+    def leaves(items, cls):
+        names = [f.name for f in dataclasses.fields(cls) if not f.metadata.get("static")]
+        return {k: np.stack([np.asarray(getattr(x, k), dtype=float) for x in items]) for k in names}
+
+    if all(general):
+        act = unchecked(
+            GeneralActuation, driven=experiments[0].act.driven, **leaves([e.act for e in experiments], GeneralActuation)
+        )
+    else:
+        act = Actuation(stacked(lambda e: e.act.tensions), stacked(lambda e: e.act.insertion))
+    load_cls = type(loads[0])
     return Experiment(
         s=stacked(lambda e: pad(e.s)),
         position=stacked(lambda e: pad(e.position)),
-        act=Actuation(stacked(lambda e: e.act.tensions), stacked(lambda e: e.act.insertion)),
-        load=TipLoad(stacked(lambda e: e.load.force), stacked(lambda e: e.load.moment)),
+        act=act,
+        load=load_cls(**leaves(loads, load_cls)) if load_cls is TipLoad else unchecked(Loads, **leaves(loads, Loads)),
         tip_mass=stacked(lambda e: e.tip_mass),
         weight=stacked(lambda e: pad(e.weight, fill=0.0)),
         name="",
     )
+
+
+def _actuation_kind(act) -> str:
+    return f"GeneralActuation(driven={act.driven})" if isinstance(act, GeneralActuation) else type(act).__name__

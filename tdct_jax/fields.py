@@ -65,6 +65,16 @@ def is_linear(name: str) -> bool:
     return name.rsplit(".", 1)[-1] in LINEAR
 
 
+def get(robot: Robot | GeneralRobot, name: str):
+    """The field's value as the robot holds it (a tracer inside jit); for ``[*]``, the first
+    item's (``value`` checks that they all agree)."""
+    where = _parse(robot, name)
+    if where is None:
+        return getattr(robot, name)
+    kind, index, field = where
+    return getattr(getattr(robot, kind)[index[0]], field)
+
+
 def value(robot: Robot | GeneralRobot, name: str) -> float:
     """The field's present value (for ``[*]``: the one value all items share).
 

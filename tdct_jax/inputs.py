@@ -12,7 +12,7 @@ import numpy as np
 
 from .checks import as_array, check_range, is_concrete
 from .loads import Actuation, TipLoad
-from .tree import pytree, set_fields, static
+from .tree import pytree, set_fields, static, unchecked
 
 
 @pytree
@@ -75,11 +75,8 @@ class GeneralActuation:
 
     @classmethod
     def _rebuild(cls, tensions, insertions, displacements, driven) -> GeneralActuation:
-        """Built without the checks (inside the solver, from traced values)."""
-        out = object.__new__(cls)
-        for name, value in dict(tensions=tensions, insertions=insertions, displacements=displacements, driven=driven).items():
-            object.__setattr__(out, name, value)
-        return out
+        """Built without the checks (inside the solver, from traced values; stacks)."""
+        return unchecked(cls, tensions=tensions, insertions=insertions, displacements=displacements, driven=driven)
 
     def scaled(self, lam) -> GeneralActuation:
         """Tensions and displacements times lam (the solver's load continuation)."""
@@ -138,8 +135,5 @@ class Loads:
 
     def scaled(self, lam) -> Loads:
         """Every load times lam (the solver's load continuation)."""
-        out = object.__new__(Loads)
-        for name in ("tip_force", "tip_moment", "point_force", "point_moment", "distributed_force"):
-            object.__setattr__(out, name, lam * getattr(self, name))
-        object.__setattr__(out, "point_s", self.point_s)
-        return out
+        scaled = {name: lam * getattr(self, name) for name in ("tip_force", "tip_moment", "point_force", "point_moment")}
+        return unchecked(Loads, point_s=self.point_s, distributed_force=lam * self.distributed_force, **scaled)

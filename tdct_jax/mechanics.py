@@ -1,5 +1,6 @@
-"""Derived mechanics: exact tip compliance (eq. 41), compliance ellipsoid (eq. 43), Jacobians,
-and the shape error against a measured shape (RMSE, eq. 39, and tip error).
+"""Derived mechanics: exact compliance (eq. 41) at the tip or at any arc length, compliance
+ellipsoid (eq. 43), Jacobians, and the shape error against a measured shape (RMSE, eq. 39, and tip
+error).
 
 Every derivative here is forward-mode autodiff through the converged shooting solution: JAX
 differentiates the root implicitly (one 6x6 shooting Jacobian, no extra Newton solves, no
@@ -15,44 +16,90 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .checks import as_array, check_range
+from . import fields
+from .checks import as_array, check_range, is_concrete
+from .description import GeneralRobot
 from .inputs import GeneralActuation, Loads
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .options import DEFAULT_SOLVER, SolverOptions
-from .robot import SCALAR_FIELDS, Robot
+from .robot import Robot
 from .so3 import rotation_columns
-from .solve import check_solution, solution_and_compliance, solve, solve_arguments
+from .solve import GeneralSolution, check_solution, solution_and_compliance, solve, solve_arguments
+from .tree import unchecked
 
 
 def compliance(
-    robot: Robot,
-    act: Actuation,
-    load: TipLoad | None = None,
+    robot: Robot | GeneralRobot,
+    act: Actuation | GeneralActuation | None,
+    load: TipLoad | Loads | None = None,
     *,
+    at=None,
     full: bool = False,
     gravity=STANDARD_GRAVITY,
     solver: SolverOptions = DEFAULT_SOLVER,
     guess=None,
     throw: bool = True,
 ):
-    """Tip compliance CM = d p(L) / d F_e (eq. 41), exact, in m/N.
+    """Compliance CM = d p(s) / d F (eq. 41), exact, in m/N: at the tip (s = L, F the tip force
+    F_e) by default, or at the arc length ``at`` (F a point force applied there).
 
-    Computed from Newton's Jacobians at the converged root (one extra 6x6 solve); derivatives of
-    CM itself (e.g. with respect to the insertion) go through forward-mode autodiff of the solve.
+    The tip's comes from Newton's Jacobians at the converged root (one extra 6x6 solve). At an arc
+    length, a zero point load at s is added to the loads and p(s) differentiated in it by forward
+    mode through the implicitly differentiated solve. Derivatives of CM itself (e.g. with respect
+    to the insertion) go through forward-mode autodiff of the solve. Displacement-driven tendons
+    hold their displacements (their tensions adjust).
 
     Args:
         robot, act, load, gravity, solver, guess: as for ``tdct.solve``; the compliance is taken
-            about this tip load.
-        full: return the 6x6 compliance d(tip position, tip rotation vector) / d(F_e, M_e) instead
-            (blocks in m/N, m/(N m), rad/N, rad/(N m); rotation vector in the world frame).
+            about these loads.
+        at: arc length s [m] in [0, L]; None: the tip. A paper ``Robot`` is solved for it through
+            ``robot.to_general()`` (the same solution to 1e-12), so ``solver`` must use the
+            'balanced' transition and the 'exact' tendon model there.
+        full: return the 6x6 compliance d(position, rotation vector of the section at s) /
+            d(force, moment at s) instead (blocks in m/N, m/(N m), rad/N, rad/(N m); rotation
+            vector and loads in the world frame).
         throw: raise ``ConvergenceError`` if the solve did not converge (default, as for
             ``tdct.solve``); with False a non-converged solve gives a matrix of NaN.
 
     Returns:
         CM, shape (3, 3) (or (6, 6) with ``full``).
+
+    Raises:
+        ValueError: bad input, ``at`` outside [0, L] included (names field, value and range).
     """
-    C, _ = compliance_and_solution(robot, act, load, gravity=gravity, solver=solver, guess=guess, throw=throw)
+    if at is None:
+        C, _ = compliance_and_solution(robot, act, load, gravity=gravity, solver=solver, guess=guess, throw=throw)
+    else:
+        if isinstance(robot, Robot):
+            robot, act, load = robot.to_general(), GeneralActuation.of(act, 1), Loads.of(load)
+        args = solve_arguments(robot, act, load, gravity, guess, solver)
+        at = as_array("at", at, ())
+        if is_concrete(robot.length):
+            L = float(robot.length)
+            check_range("at", at, 0.0, L, unit=f" m (0 to the robot length {L:g} m)")
+        C, _ = _checked(_compliance_at, (*args[:-1], at, args[-1]), throw)
     return C if full else C[:3, :3]
+
+
+@jax.jit
+def _compliance_at(robot, act, load, gravity, guess, s, solver):
+    """(d(position, rotation vector at s) / d(point force, moment at s), Solution) of a GeneralRobot."""
+
+    def pose(w):
+        point = dict(
+            point_s=jnp.append(load.point_s, s),
+            point_force=jnp.concatenate([jnp.reshape(load.point_force, (-1, 3)), w[None, :3]]),
+            point_moment=jnp.concatenate([jnp.reshape(load.point_moment, (-1, 3)), w[None, 3:]]),
+        )
+        loads = unchecked(
+            Loads, tip_force=load.tip_force, tip_moment=load.tip_moment, distributed_force=load.distributed_force, **point
+        )
+        sol = solution_and_compliance(robot, act, loads, gravity, guess, solver)[0]
+        i = jnp.searchsorted(sol.s, s, side="right") - 1  # a node lies at s: it is a breakpoint
+        return (sol.position[i], sol.rotation[i]), (sol, sol.rotation[i])
+
+    (Jp, JR), (sol, R) = jax.jacfwd(pose, has_aux=True)(jnp.zeros(6))
+    return jnp.concatenate([Jp, rotation_columns(JR, R)]), sol
 
 
 def compliance_and_solution(robot, act, load=None, *, gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True):
@@ -62,7 +109,7 @@ def compliance_and_solution(robot, act, load=None, *, gravity=STANDARD_GRAVITY, 
 
 def _checked(f, args, throw, *static):
     """f(*args, *static) = (matrix, Solution), with ``throw`` applied, or the matrix masked with
-    NaN where the solve did not converge."""
+    NaN where the solve did not converge; ``args[-1]`` is the SolverOptions."""
     M, sol = f(*args, *static)
     check_solution(sol, args[-1], throw)
     return jnp.where(sol.converged, M, jnp.nan), sol
@@ -86,8 +133,9 @@ def _compliance_jvp(primals, tangents):
 
 
 def pose_jacobian(robot, act, load, gravity, guess, solver, wrt):
-    """(d(tip pose) / dw, Solution) for w the tip load ("load"), the actuation ("actuation") or a
-    tuple of scalar Robot field names; the rotation part is vee(dR R^T) in the world frame, (6, n)."""
+    """(d(tip pose) / dw, Solution) for w the tip load ("load"), the actuation ("actuation": see
+    ``kinematic_jacobian`` for the columns) or a tuple of field names (``fields.py``); the rotation
+    part is vee(dR R^T) in the world frame, (6, n)."""
     if wrt == "load":
         general = isinstance(load, Loads)
         force, moment = (load.tip_force, load.tip_moment) if general else (load.force, load.moment)
@@ -96,20 +144,24 @@ def pose_jacobian(robot, act, load, gravity, guess, solver, wrt):
         def configure(w):
             return robot, act, dataclasses.replace(load, tip_force=w[:3], tip_moment=w[3:]) if general else TipLoad(w[:3], w[3:])
 
-    elif wrt == "actuation":
-        general = isinstance(act, GeneralActuation)
-        depth = act.insertions if general else jnp.reshape(jnp.asarray(act.insertion), (1,))
-        w = jnp.concatenate([jnp.asarray(act.tensions), jnp.asarray(depth, float)])
-        n_t = jnp.size(act.tensions)
+    elif wrt == "actuation" and isinstance(act, GeneralActuation):
+        parts = [jnp.asarray(x, float).reshape(-1) for x in (act.tensions, act.displacements, act.insertions)]
+        w, cut = jnp.concatenate(parts), np.cumsum([p.size for p in parts])
 
         def configure(w):
-            return robot, GeneralActuation(w[:n_t], w[n_t:]) if general else Actuation(w[:-1], w[-1]), load
+            return robot, GeneralActuation._rebuild(w[: cut[0]], w[cut[1] :], w[cut[0] : cut[1]], act.driven), load
+
+    elif wrt == "actuation":
+        w = jnp.concatenate([jnp.asarray(act.tensions), jnp.reshape(jnp.asarray(act.insertion, float), (1,))])
+
+        def configure(w):
+            return robot, Actuation(w[:-1], w[-1]), load
 
     else:
-        w = jnp.stack([jnp.asarray(getattr(robot, p)) for p in wrt])
+        w = jnp.stack([jnp.asarray(fields.get(robot, p), float) for p in wrt])
 
         def configure(w):
-            return dataclasses.replace(robot, **dict(zip(wrt, w, strict=True))), act, load
+            return fields.replace(robot, dict(zip(wrt, w, strict=True))), act, load
 
     def pose(w):
         sol = solution_and_compliance(*configure(w), gravity, guess, solver)[0]
@@ -123,11 +175,15 @@ _pose_jacobian = jax.jit(pose_jacobian, static_argnums=(6,))
 
 
 def kinematic_jacobian(robot, act, load=None, *, gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True):
-    """d(tip position [m], tip rotation vector [rad]) / d(tensions [N], insertion [m]), shape (6, n_t + 1)
-    (a GeneralRobot: (6, n_t + n_tubes), one column per tube's insertion).
+    """d(tip position [m], tip rotation vector [rad]) / d(tensions [N], insertion [m]), shape (6, n_t + 1).
 
     The last column is the tube insertion depth, a real differentiable input (one-sided at d = 0
     and d = L, where the solution extends smoothly). Arguments as for ``compliance``.
+
+    With a GeneralActuation, one column per input, shape (6, n_t + len(driven) + n_tubes): each
+    tendon's tension [N] in the robot's order, then each displacement-driven tendon's
+    displacement [m] in ``driven`` order, then each tube's insertion [m]. A driven tendon's
+    tension column is zero: its tension follows from its displacement.
     """
     return _checked(_pose_jacobian, solve_arguments(robot, act, load, gravity, guess, solver), throw, "actuation")[0]
 
@@ -135,15 +191,26 @@ def kinematic_jacobian(robot, act, load=None, *, gravity=STANDARD_GRAVITY, solve
 def parameter_jacobian(
     robot, act, load=None, *, params=("E_silicone",), gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True
 ):
-    """d(tip position, tip rotation vector) / d(scalar Robot fields named in ``params``), (6, len(params)).
+    """d(tip position, tip rotation vector) / d(fields named in ``params``), (6, len(params)).
 
-    Units follow the fields (e.g. m/Pa for E_silicone). Arguments as for ``compliance``.
+    Field names as in ``fields.py``: a Robot's "E_silicone", ..., a GeneralRobot's
+    "sections[*].E", "tendons[0].offset", ... ("[*]": one value shared by every item). Units
+    follow the fields (e.g. m/Pa for E_silicone). Arguments as for ``compliance``.
     """
+    check_params(robot, params)
     for p in params:
-        if p not in SCALAR_FIELDS:
-            raise ValueError(f"params: {p!r} is not a scalar Robot field; allowed: {list(SCALAR_FIELDS)}")
+        fields.value(robot, p)  # set, and for "[*]" one value
     args = solve_arguments(robot, act, load, gravity, guess, solver)
     return _checked(_pose_jacobian, args, throw, tuple(params))[0]
+
+
+def check_params(robot: Robot | GeneralRobot, params) -> None:
+    """Raises ValueError unless each of ``params`` is one of the robot's fields (``fields.check``)."""
+    for p in params:
+        try:
+            fields.check(robot, p)
+        except ValueError as e:
+            raise ValueError(f"params: {e}") from None
 
 
 def finite_difference_compliance(robot, act, load=None, *, step: float = 1e-4, gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER):
@@ -198,8 +265,9 @@ def positions_at(sol, s):
     """The model's positions p(s) [m] at arc lengths ``s`` [m], shape s.shape + (3,).
 
     Cubic Hermite interpolation between RK4 nodes with the exact tangents p' = R v, so the
-    interpolation error is O(h^4) like RK4's own. Arc lengths outside [0, L] are clamped to the
-    ends. Differentiable in the solution (for calibration); not in ``s``.
+    interpolation error is O(h^4) like RK4's own (a GeneralSolution: each interval between
+    breakpoints with its own end tangents). Arc lengths outside [0, L] are clamped to the ends.
+    Differentiable in the solution (for calibration); not in ``s``.
     """
     nodes, p = sol.s, sol.position
     n = nodes.size
@@ -209,12 +277,14 @@ def positions_at(sol, s):
     t = jnp.where(h > 0, (s - nodes[k]) / jnp.where(h > 0, h, 1.0), 0.0)[..., None]
     h = h[..., None]
     tangent = jnp.einsum("nij,nj->ni", sol.rotation, sol.strain)
-    # The node at s = d carries the backbone's strain, but p' jumps there (the silicone shears):
-    # the first silicone interval takes its left tangent from a one-sided cubic through 4 nodes.
-    j = (n - 1) // 2
-    q = p[jnp.minimum(j + jnp.arange(4), n - 1)]
-    h_right_of_d = jnp.broadcast_to((-11 * q[0] + 18 * q[1] - 9 * q[2] + 2 * q[3]) / 6, t.shape[:-1] + (3,))
-    hm0 = jnp.where(((k == j) & (nodes[j] > 0))[..., None], h_right_of_d, h * tangent[k])
+    hm0 = h * tangent[k]
+    if not isinstance(sol, GeneralSolution):  # a GeneralSolution has both sides of every breakpoint
+        # The node at s = d carries the backbone's strain, but p' jumps there (the silicone shears):
+        # the first silicone interval takes its left tangent from a one-sided cubic through 4 nodes.
+        j = (n - 1) // 2
+        q = p[jnp.minimum(j + jnp.arange(4), n - 1)]
+        h_right_of_d = jnp.broadcast_to((-11 * q[0] + 18 * q[1] - 9 * q[2] + 2 * q[3]) / 6, t.shape[:-1] + (3,))
+        hm0 = jnp.where(((k == j) & (nodes[j] > 0))[..., None], h_right_of_d, hm0)
     p0, p1, hm1 = p[k], p[k + 1], h * tangent[k + 1]
     return (2 * t**3 - 3 * t**2 + 1) * p0 + (t**3 - 2 * t**2 + t) * hm0 + (-2 * t**3 + 3 * t**2) * p1 + (t**3 - t**2) * hm1
 

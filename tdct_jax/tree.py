@@ -49,3 +49,11 @@ def set_fields(obj, **values) -> None:
     """Sets fields of a frozen dataclass from its ``__post_init__`` (the checked, converted values)."""
     for name, value in values.items():
         object.__setattr__(obj, name, value)
+
+
+def unchecked(cls, **values):
+    """An instance of a ``pytree`` class holding ``values`` as they are, without ``__post_init__``'s
+    checks: for values built inside a transformation or with batch axes (a stack)."""
+    obj = object.__new__(cls)
+    set_fields(obj, **values)
+    return obj
