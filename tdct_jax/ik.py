@@ -35,9 +35,11 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from . import status
+from . import general, status
 from .batch import Kernel, default_chunk_size, lanes_per_call, run_batched
 from .checks import UnitWarning, as_array, check_choice, check_integer, check_range, is_concrete, target_note, warn_user
+from .description import GeneralRobot
+from .inputs import GeneralActuation, Loads
 from .linalg import solve_spd
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
@@ -119,32 +121,41 @@ class Bounds:
     """Physical bounds on the inputs: tendons only pull, the tube stays inside the robot.
 
     Attributes:
-        tension: (lowest, highest) tension of every free tendon [N], 0 <= lowest <= highest.
-        insertion: (shallowest, deepest) insertion [m] in [0, L]; None: (0, L).
+        tension: (lowest, highest) tension of every free tendon [N], 0 <= lowest <= highest; on a
+            GeneralRobot a tendon's own ``max_tension`` lowers its highest.
+        insertion: (shallowest, deepest) insertion of every free tube [m] in [0, L]; None: (0, L).
+        displacement: (lowest, highest) displacement of every free displacement-driven tendon of a
+            GeneralRobot [m]; None: (-L / 10, L / 10).
     """
 
     tension: tuple = (0.0, 10.0)
     insertion: tuple | None = None
+    displacement: tuple | None = None
 
     def __post_init__(self):
         tension = as_array("bounds.tension", self.tension, (2,), unit=" N")
         check_range("bounds.tension", tension, 0.0, unit=" N")
         insertion = None if self.insertion is None else as_array("bounds.insertion", self.insertion, (2,), unit=" m")
         check_range("bounds.insertion", insertion, 0.0, unit=" m") if insertion is not None else None
-        for name, b in (("bounds.tension", tension), ("bounds.insertion", insertion)):
+        displacement = self.displacement
+        if displacement is not None:
+            displacement = as_array("bounds.displacement", displacement, (2,), unit=" m")
+        for name, b in (("bounds.tension", tension), ("bounds.insertion", insertion), ("bounds.displacement", displacement)):
             if b is not None and is_concrete(b) and b[0] > b[1]:
                 raise ValueError(f"{name} = {b.tolist()} must be (lowest, highest) with lowest <= highest")
-        set_fields(self, tension=tension, insertion=insertion)
+        set_fields(self, tension=tension, insertion=insertion, displacement=displacement)
 
 
 DEFAULT_BOUNDS = Bounds()
 
 
 class Plan(NamedTuple):
-    """What is free (static): which tendons (0-based), whether the insertion, which objective."""
+    """What is free (static): which tendons and which tubes (0-based; a ``Robot``'s one tube is
+    tube 0, its insertion), which objective. v holds the free tendons' scaled tensions (or, for a
+    GeneralActuation's ``driven`` tendons, scaled displacements) in this order, then the tubes'."""
 
     tendons: tuple
-    insertion: bool
+    tubes: tuple
     objective: object  # None, a name in OBJECTIVES, or a callable (sol, act) -> scalar
     method: str
 
@@ -154,7 +165,9 @@ class IKResult:
     """Outcome of ``inverse_kinematics``.
 
     Attributes:
-        actuation: the tensions [N] and insertion [m] found (every bound holds).
+        actuation: the tensions [N] and insertion [m] found (every bound holds); for a
+            GeneralRobot a GeneralActuation, its tensions those of the solution (the driven
+            tendons' included).
         solution: the forward Solution there (``solution.tip_position`` etc.).
         position_error: distance from the tip to the target position (over ``target.axes``) [m].
         orientation_error: angle between tip and target orientation [rad] (0 without one).
@@ -229,11 +242,11 @@ def box_qp(H, g, lo, hi, J=None, c=None):
 class Problem(NamedTuple):
     """Everything an IK step needs besides the free inputs v (a pytree; ``plan`` is static)."""
 
-    robot: Robot
+    robot: Robot | GeneralRobot
     target: Target
-    load: TipLoad
+    load: TipLoad | Loads  # Loads for a GeneralRobot
     gravity: jax.Array
-    base: Actuation  # values of the fixed inputs
+    base: Actuation | GeneralActuation  # values of the fixed inputs, by the robot's kind
     lo: jax.Array  # bounds of v
     hi: jax.Array
     tension_scale: jax.Array  # [N] per unit of v
@@ -242,22 +255,73 @@ class Problem(NamedTuple):
     direction: jax.Array  # unit world direction for the "stiffness" objective (NaN: largest eigenvalue)
 
 
-def actuation_of(v, prob: Problem, plan: Plan) -> Actuation:
-    """The Actuation with the free inputs set from the scaled v."""
-    k = len(plan.tendons)
-    tensions = jnp.asarray(prob.base.tensions)
-    if k:
-        tensions = tensions.at[jnp.asarray(plan.tendons)].set(v[:k] * prob.tension_scale)
-    insertion = v[k] * prob.robot.length if plan.insertion else jnp.asarray(prob.base.insertion)
-    return Actuation(tensions, insertion)
+DISPLACEMENT_SCALE = 0.1
+"""A free displacement-driven tendon's scaled input: its displacement over this fraction of L."""
 
 
-def scaled_inputs(act: Actuation, prob: Problem, plan: Plan):
-    """The inverse of ``actuation_of``: v of an Actuation."""
-    v = [jnp.asarray(act.tensions)[jnp.asarray(plan.tendons)] / prob.tension_scale] if plan.tendons else []
-    if plan.insertion:
-        v.append(jnp.reshape(act.insertion / prob.robot.length, (1,)))
-    return jnp.concatenate(v) if v else jnp.zeros(0)
+def _split(base, plan: Plan):
+    """Static positions in v of the free tendons driven by tension and of those driven by
+    displacement (a GeneralActuation's ``driven``), with the latter's places in ``displacements``."""
+    driven = getattr(base, "driven", ())
+    pulled = tuple(j for j, t in enumerate(plan.tendons) if t not in driven)
+    moved = tuple(j for j, t in enumerate(plan.tendons) if t in driven)
+    return pulled, moved, tuple(driven.index(plan.tendons[j]) for j in moved)
+
+
+def actuation_of(v, prob: Problem, plan: Plan):
+    """The actuation (an Actuation, or a GeneralActuation for a GeneralRobot) with the free inputs
+    set from the scaled v."""
+    k, base, L = len(plan.tendons), prob.base, prob.robot.length
+    if isinstance(base, Actuation):
+        tensions = jnp.asarray(base.tensions)
+        if k:
+            tensions = tensions.at[jnp.asarray(plan.tendons)].set(v[:k] * prob.tension_scale)
+        insertion = v[k] * L if plan.tubes else jnp.asarray(base.insertion)
+        return Actuation(tensions, insertion)
+    pulled, moved, places = _split(base, plan)
+    tensions, insertions, displacements = (jnp.asarray(x, float) for x in (base.tensions, base.insertions, base.displacements))
+    if pulled:
+        free = np.array([plan.tendons[j] for j in pulled])
+        tensions = tensions.at[free].set(v[np.array(pulled)] * prob.tension_scale)
+    if moved:
+        displacements = displacements.at[np.array(places)].set(v[np.array(moved)] * (DISPLACEMENT_SCALE * L))
+    if plan.tubes:
+        insertions = insertions.at[np.array(plan.tubes)].set(v[k:] * L)
+    return GeneralActuation._rebuild(tensions, insertions, displacements, base.driven)
+
+
+def scaled_inputs(act, prob: Problem, plan: Plan):
+    """The inverse of ``actuation_of``: v of an actuation."""
+    L = prob.robot.length
+    if isinstance(act, Actuation):
+        v = [jnp.asarray(act.tensions)[jnp.asarray(plan.tendons)] / prob.tension_scale] if plan.tendons else []
+        if plan.tubes:
+            v.append(jnp.reshape(act.insertion / L, (1,)))
+        return jnp.concatenate(v) if v else jnp.zeros(0)
+    pulled, moved, places = _split(act, plan)
+    v = jnp.zeros(len(plan.tendons) + len(plan.tubes))
+    if pulled:
+        v = v.at[np.array(pulled)].set(
+            jnp.asarray(act.tensions)[np.array([plan.tendons[j] for j in pulled])] / prob.tension_scale
+        )
+    if moved:
+        v = v.at[np.array(moved)].set(jnp.asarray(act.displacements)[np.array(places)] / (DISPLACEMENT_SCALE * L))
+    if plan.tubes:
+        v = v.at[len(plan.tendons) :].set(jnp.asarray(act.insertions)[np.array(plan.tubes)] / L)
+    return v
+
+
+def _wrench(sol, act):
+    """The shooting unknowns of a Solution, unscaled: its base wrench, then (a GeneralRobot's)
+    the displacement-driven tendons' tensions [N]."""
+    if getattr(act, "driven", ()):
+        return jnp.concatenate([sol.base_wrench, sol.tensions[np.array(act.driven)]])
+    return sol.base_wrench
+
+
+def _tip_force(load):
+    """The tip force [N] of a TipLoad or Loads."""
+    return load.force if isinstance(load, TipLoad) else load.tip_force
 
 
 def task_residual(p, R, target: Target, L):
@@ -301,7 +365,8 @@ def objective_value(sol: Solution, C, act: Actuation, prob: Problem, plan: Plan)
     if plan.objective == "tension":
         return jnp.sum(jnp.asarray(act.tensions) ** 2)
     if plan.objective == "insertion":
-        return (act.insertion - prob.preferred_insertion) ** 2
+        insertion = act.insertion if isinstance(act, Actuation) else act.insertions[0]  # one tube (checked)
+        return (insertion - prob.preferred_insertion) ** 2
     return plan.objective(sol, act)
 
 
@@ -328,14 +393,15 @@ def evaluate(v, guess, prob: Problem, plan: Plan) -> Evaluation:
         F_c = force_scale(*problem)
         if callable(plan.objective):
             sol = solution_and_compliance(*problem, guess, prob.solver)[0]
-            x, code, p, R = scaled(prob.robot, sol.base_wrench, F_c), sol.result, sol.tip_position, sol.tip_rotation
+            x, code, p, R = scaled(prob.robot, _wrench(sol, act), F_c), sol.result, sol.tip_position, sol.tip_rotation
         else:
             sol, (x, info) = None, root(*problem, guess, prob.solver)
             tip = shoot(*problem, prob.solver, x, F_c)[1]
             code, p, R = info.result, tip.p, tip.R
         e = task_residual(p, R, prob.target, prob.robot.length)
         C = compliance_at(*problem, prob.solver, x) if plan.objective == "stiffness" else None
-        phi = jnp.zeros(()) if plan.objective is None else objective_value(sol, C, act, prob, plan)
+        pulled = general.with_driven(act, x, F_c) if isinstance(act, GeneralActuation) else act  # the driven tensions found
+        phi = jnp.zeros(()) if plan.objective is None else objective_value(sol, C, pulled, prob, plan)
         return (e, phi), (e, phi, unscaled(prob.robot, x, F_c), code)
 
     (G, dphi), (e, phi, wrench, code) = jax.jacfwd(f, has_aux=True)(v)
@@ -447,9 +513,10 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> R
     start, so the Jacobian pass is compiled once."""
     robot, L = prob.robot, prob.robot.length
     F_s = force_scale(robot, actuation_of(v0, prob, plan), prob.load, prob.gravity)
+    n = 6 + len(getattr(prob.base, "driven", ()))  # shooting unknowns: the base wrench, driven tensions
 
     def residuals(z):
-        x, v = z[:6], z[6:]
+        x, v = z[:n], z[n:]
         r, tip = shoot(robot, actuation_of(v, prob, plan), prob.load, prob.gravity, prob.solver, x, F_s)
         F = jnp.concatenate([r, task_residual(tip.p, tip.R, prob.target, L)])
         return F, F
@@ -457,8 +524,8 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> R
     def linearise(z):
         """Residuals, and x eliminated by Newton: dx = dx0 + K dv; the reduced G and e there."""
         Jz, F = jax.jacfwd(residuals, has_aux=True)(z)
-        r, e = F[:6], F[6:]
-        Jx, Jv, Ex, Ev = Jz[:6, :6], Jz[:6, 6:], Jz[6:, :6], Jz[6:, 6:]
+        r, e = F[:n], F[n:]
+        Jx, Jv, Ex, Ev = Jz[:n, :n], Jz[:n, n:], Jz[n:, :n], Jz[n:, n:]
         M = jnp.linalg.solve(Jx, jnp.concatenate([r[:, None], Jv], axis=1))
         dx0, K = -M[:, 0], -M[:, 1:]
         return F, (dx0, K, Ev + Ex @ K, e + Ex @ dx0)
@@ -480,25 +547,25 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> R
         mu, nu = jnp.where(first, mu, damped[0]), jnp.where(first, nu, damped[1])
         # while the boundary residual is off, e is not yet the task error: a step that halves r is
         # taken even where it moves e the wrong way
-        restores = (jnp.max(jnp.abs(F[:6])) > prob.solver.tol) & (jnp.linalg.norm(F_t[:6]) <= 0.5 * jnp.linalg.norm(F[:6]))
+        restores = (jnp.max(jnp.abs(F[:n])) > prob.solver.tol) & (jnp.linalg.norm(F_t[:n]) <= 0.5 * jnp.linalg.norm(F[:n]))
         better = first | damped[2] | restores
         stalled = ~first & damped[2] & (merit(F) - merit(F_t) <= STALLED * merit(F))
         z, F, lin = _where(better, (trial, F_t, lin_t), (z, F, lin))
-        code, done = _reach_status(F[6:], lin[2], z[6:], mu, it, prob, tol, max_steps, stalled)
+        code, done = _reach_status(F[n:], lin[2], z[n:], mu, it, prob, tol, max_steps, stalled)
         # reached only with the boundary residual converged too; stationary (UNREACHABLE) once it is
         # near enough for the closing forward solve to converge from here
-        r = jnp.max(jnp.abs(F[:6]))
+        r = jnp.max(jnp.abs(F[:n]))
         code = jnp.where((code == status.SUCCESS) & (r > prob.solver.tol), jnp.int32(status.OUTER_LIMIT), code)
         code = jnp.where((code == status.UNREACHABLE) & (r > jnp.sqrt(prob.solver.tol)), jnp.int32(status.OUTER_LIMIT), code)
         done = done & ((code != status.OUTER_LIMIT) | (it >= max_steps) | (mu >= MU_GIVE_UP))
-        s = _lm_step(lin[2], lin[3], mu, prob.lo - z[6:], prob.hi - z[6:])
+        s = _lm_step(lin[2], lin[3], mu, prob.lo - z[n:], prob.hi - z[n:])
         return z, F, lin, s, mu, nu, it + 1, code, done
 
     z0 = jnp.concatenate([scaled(robot, wrench0, F_s), v0])
     F0, lin0 = _unset(linearise, z0)
     init = (z0, F0, lin0, jnp.zeros_like(v0), jnp.asarray(MU_START), jnp.asarray(2.0), 0, jnp.int32(status.OUTER_LIMIT), False)
     z, F, _, _, _, _, it, code, _ = lax.while_loop(cond, body, init)
-    return Reach(z[6:], unscaled(robot, z[:6], F_s), F[6:], it - 1, code)
+    return Reach(z[n:], unscaled(robot, z[:n], F_s), F[n:], it - 1, code)
 
 
 # ----------------------------------------------------------------------------- phase 2: optimise
@@ -611,19 +678,44 @@ def default_start(prob: Problem, plan: Plan, p, force):
     """A start from the target position p [m] alone: the circular arc from the base (tangent +z)
     through p, less the sag that the tip force [N] and the robot's weight would cause on their own
     (a linear cantilever estimate), fixes a bending angle; the tendons on that side pull with the
-    tension whose moment bends the silicone so far, no tube."""
+    tension whose moment bends the silicone so far, no tube. A GeneralRobot: its first section's
+    stiffness and density, every tendon as if anchored at the tip; free displacement-driven tendons
+    start at the displacement ``prob.base`` gives."""
     robot = prob.robot
-    L, EI = robot.length, robot.bending_stiffness(False)[0]
-    sag = (force * L**3 / 3 + robot.linear_density(False) * prob.gravity * L**4 / 8) / EI
+    L, (EI, rho, angles, offsets) = robot.length, _arc_parameters(robot)
+    sag = (force * L**3 / 3 + rho * prob.gravity * L**4 / 8) / EI
     sag = sag * jnp.minimum(1.0, 0.5 * L / jnp.maximum(jnp.linalg.norm(sag[:2]), 1e-300))
     x, y = p[0] - sag[0], p[1] - sag[1]
     angle = 2 * jnp.arctan2(jnp.hypot(x, y), jnp.maximum(p[2], 0.0))
-    share = jnp.maximum(jnp.cos(jnp.asarray(robot.tendon_angles) - jnp.arctan2(y, x)), 0.0)
-    tensions = angle / L * EI * share / jnp.maximum(jnp.sum(share**2), 1e-12) / robot.tendon_offset
-    v = [tensions[jnp.asarray(plan.tendons)] / prob.tension_scale] if plan.tendons else []
-    if plan.insertion:
-        v.append(jnp.reshape(prob.lo[-1], (1,)))
-    return jnp.clip(jnp.concatenate(v), prob.lo, prob.hi)
+    share = jnp.maximum(jnp.cos(angles - jnp.arctan2(y, x)), 0.0)
+    tensions = angle / L * EI * share / jnp.maximum(jnp.sum(share**2), 1e-12) / offsets
+    k = len(plan.tendons)
+    if isinstance(prob.base, Actuation):
+        v = [tensions[jnp.asarray(plan.tendons)] / prob.tension_scale] if plan.tendons else []
+        if plan.tubes:
+            v.append(jnp.reshape(prob.lo[-1], (1,)))
+        v = jnp.concatenate(v)
+    else:
+        base = prob.base
+        v = scaled_inputs(GeneralActuation._rebuild(tensions, base.insertions, base.displacements, base.driven), prob, plan)
+        v = v.at[k:].set(prob.lo[k:])
+    return jnp.clip(v, prob.lo, prob.hi)
+
+
+def _arc_parameters(robot):
+    """(bending stiffness [N m^2], linear density [kg/m], tendon angles [rad], offsets [m]) for
+    ``default_start``: a Robot's silicone, a GeneralRobot's first section (no channels)."""
+    if isinstance(robot, Robot):
+        return (
+            robot.bending_stiffness(False)[0],
+            robot.linear_density(False),
+            jnp.asarray(robot.tendon_angles),
+            robot.tendon_offset,
+        )
+    sec = robot.sections[0]
+    D, d = sec.outer_diameter, sec.inner_diameter
+    angles, offsets = (jnp.stack([jnp.asarray(getattr(t, k), float) for t in robot.tendons]) for k in ("angle", "offset"))
+    return sec.E * jnp.pi / 64 * (D**4 - d**4), sec.density * jnp.pi / 4 * (D**2 - d**2), angles, jnp.maximum(offsets, 1e-300)
 
 
 class Found(NamedTuple):
@@ -641,10 +733,10 @@ def starts(v0, prob: Problem, plan: Plan):
     k = len(plan.tendons)
 
     def with_insertion(v, where):
-        return v.at[k].set(lo[k] + where * (hi[k] - lo[k])) if plan.insertion else v
+        return v.at[k:].set(lo[k:] + where * (hi[k:] - lo[k:])) if plan.tubes else v
 
     quarter = lo + 0.25 * (hi - lo)
-    arc = default_start(prob, plan, prob.target.position, prob.load.force)
+    arc = default_start(prob, plan, prob.target.position, _tip_force(prob.load))
     return jnp.stack(
         [v0, with_insertion(lo, 0.0), with_insertion(lo, 1.0), with_insertion(quarter, 0.5), with_insertion(arc, 1.0)]
     )
@@ -684,7 +776,7 @@ def find(prob: Problem, v0, wrench0, n_starts, plan: Plan, tol, max_steps) -> Fo
         closer = (rank < best_rank) | ((rank == best_rank) & (r.e @ r.e < best.e @ best.e))
         return k + 1, jax.tree.map(lambda a, b: jnp.where(closer, a, b), r, best), steps + r.steps
 
-    none = Reach(v0, jnp.full(6, jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT))
+    none = Reach(v0, jnp.full(jnp.shape(wrench0), jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT))
     _, r, steps = lax.while_loop(cond, body, (0, none, 0))
     r = r._replace(steps=steps)
     if plan.objective is not None:
@@ -751,24 +843,27 @@ def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, tol, max_steps, n_start
     found = find(prob, v0, wrench0, n_starts, plan, tol, max_steps)
     act = actuation_of(found.v, prob, plan)
     sol, C = solution_and_compliance(prob.robot, act, prob.load, prob.gravity, found.wrench, prob.solver)
+    if isinstance(act, GeneralActuation):  # the driven tendons' tensions as found
+        act = GeneralActuation._rebuild(sol.tensions, act.insertions, act.displacements, act.driven)
     position, orientation = pose_errors(sol.tip_position, sol.tip_rotation, prob.target)
     phi = jnp.nan if plan.objective is None else objective_value(sol, C, act, prob, plan)
     code = jnp.where(sol.result == status.SUCCESS, found.code, sol.result).astype(jnp.int32)
-    return IKResult(act, sol, position, orientation, jnp.asarray(phi, float), found.steps, code), sol.base_wrench
+    return IKResult(act, sol, position, orientation, jnp.asarray(phi, float), found.steps, code), _wrench(sol, act)
 
 
 def inverse_kinematics(
-    robot: Robot,
+    robot: Robot | GeneralRobot,
     target,
     *,
-    load: TipLoad | None = None,
+    load: TipLoad | Loads | None = None,
     tendons=None,
+    tubes=None,
     insertion=None,
     bounds: Bounds = DEFAULT_BOUNDS,
     objective=None,
     direction=None,
     preferred_insertion=None,
-    guess: Actuation | None = None,
+    guess: Actuation | GeneralActuation | None = None,
     method: str = "augmented",
     tol: float = TOL,
     max_steps: int = MAX_STEPS,
@@ -779,24 +874,32 @@ def inverse_kinematics(
     """Tensions and insertion that put the tip at ``target`` (paper Secs. V.A, V.B; module docstring).
 
     Args:
-        robot: the robot.
+        robot: the paper's ``Robot`` or any ``GeneralRobot``.
         target: a Target (or a tip position [m], (3,)); a leading batch axis on its fields solves
             many targets at once (``jax.vmap``).
         load: tip force [N] and moment [N m], world frame, held while reaching; none by default.
-        tendons: the free tendons, numbered from 1 like the paper: a number or a sequence
-            (default all); the others keep the tension ``guess`` gives them (default 0).
-        insertion: None (free) or a fixed insertion depth [m].
-        bounds: Bounds on the free tensions [N] and the insertion [m]; never violated.
+            For a GeneralRobot also ``Loads`` (one for every target).
+        tendons: the free tendons, numbered from 1 like the paper (a GeneralRobot's tendon i + 1
+            is its ``tendons[i]``): a number or a sequence (default all); the others keep the
+            tension ``guess`` gives them (default 0). A tendon that ``guess`` (a GeneralActuation)
+            lists in ``driven`` is free in its displacement, its tension found by the solve.
+        tubes: a GeneralRobot's free tubes, numbered from 1 (default all); the others keep the
+            depth ``guess`` gives them (default 0).
+        insertion: None (free) or a fixed insertion depth [m] (a GeneralRobot: every tube's, one
+            depth or one per tube).
+        bounds: Bounds on the free tensions [N], insertions [m] and displacements [m]; never
+            violated (a driven tendon's tension is not bounded).
         objective: among redundant solutions (free inputs beyond the task's dimensions), the one
             that minimises "stiffness" (the tip compliance along ``direction`` [m/N], or without a
             direction the largest eigenvalue of its symmetric part), "tension" (total squared
             tension: no needless co-contraction), "insertion" (squared distance from
-            ``preferred_insertion`` [m], default L / 2), or a callable f(Solution, Actuation) ->
+            ``preferred_insertion`` [m], default L / 2; one free tube), or a callable f(Solution, Actuation) ->
             scalar, differentiable. None: the first solution found. With no more free inputs
             than task coordinates there is nothing to choose: a ValueError says so.
         direction: world direction for the "stiffness" objective, (3,), nonzero.
         preferred_insertion: for the "insertion" objective [m], in [0, L].
-        guess: an Actuation to start from (free inputs) and to take the fixed tensions from.
+        guess: an Actuation (a GeneralRobot: a GeneralActuation) to start from (free inputs) and
+            to take the fixed inputs from.
         method: "augmented" (shooting unknowns and inputs iterated together) or "nested"
             (a converged forward solve at every step).
         tol: tolerance on the scaled task residual (position error / L; orientation error [rad]).
@@ -823,7 +926,7 @@ def _batched(run, prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
     With concrete values they run through the batch engine in chunks, each target from its first
     start only; those that did not reach run again from every start, so that a few hard targets
     do not hold up the rest. Traced (inside the caller's jit or vmap): one vmap, every start."""
-    loads = jnp.ndim(prob.load.force) == 2
+    loads = jnp.ndim(_tip_force(prob.load)) == 2
     per = (prob.target, prob.load if loads else None)
     if not all(is_concrete(x) for x in jax.tree.leaves((prob, v0))):
         return jax.vmap(lambda per, v: run(_one(prob, per), v, wrench0, plan)[0])(per, v0)
@@ -931,6 +1034,7 @@ def _problem(
     *,
     load,
     tendons,
+    tubes,
     insertion,
     bounds,
     objective,
@@ -943,13 +1047,21 @@ def _problem(
     gravity,
     solver,
 ):
-    """Checks the arguments; returns (Problem, Plan, start v0, start wrench (NaN))."""
+    """Checks the arguments; returns (Problem, Plan, start v0, start unknowns (NaN))."""
     if not isinstance(target, Target):
         target = Target(target)
-    load = TipLoad() if load is None else load
-    base = Actuation(np.zeros(robot.n_tendons)) if guess is None else guess
-    check_inputs(robot, base, load, solver, batch=jnp.ndim(target.position) == 2)
-    n_t = robot.n_tendons
+    is_general = isinstance(robot, GeneralRobot)
+    batched = jnp.ndim(target.position) == 2
+    n_t, n_tubes = robot.n_tendons, robot.n_tubes if is_general else 1
+    L = float(robot.length) if is_concrete(robot.length) else robot.length
+    if is_general:
+        load = Loads.of(load)
+        base = GeneralActuation(np.zeros(n_t), np.zeros(n_tubes)) if guess is None else GeneralActuation.of(guess, n_tubes)
+        general.check_arguments(robot, base, load, solver)
+    else:
+        load = TipLoad() if load is None else load
+        base = Actuation(np.zeros(n_t)) if guess is None else guess
+        check_inputs(robot, base, load, solver, batch=batched)
     typed = tendons
     if tendons is None:
         tendons = tuple(range(1, n_t + 1))
@@ -959,18 +1071,22 @@ def _problem(
         tendons = tuple(tendons)
     for t in tendons if isinstance(tendons, tuple) else (None,):
         if isinstance(t, bool) or not isinstance(t, (int, np.integer)) or not 1 <= t <= n_t:
-            raise ValueError(
-                f"tendons = {typed!r}: a tendon number or a sequence of them, each in [1, {n_t}] (tendon 1 at body +y)"
-            )
+            where = f"tendons[0] to tendons[{n_t - 1}] of the robot" if is_general else "tendon 1 at body +y"
+            raise ValueError(f"tendons = {typed!r}: a tendon number or a sequence of them, each in [1, {n_t}] ({where})")
     if len(set(tendons)) != len(tendons):
         raise ValueError(f"tendons = {tendons!r} names a tendon twice")
-    L = float(robot.length) if is_concrete(robot.length) else robot.length
+    tubes = _free_tubes(tubes, insertion, n_tubes, is_general)
     if insertion is not None:
-        insertion = as_array("insertion", insertion, (), unit=" m")
+        shape = (n_tubes,) if is_general and np.ndim(insertion) == 1 else ()
+        insertion = as_array("insertion", insertion, shape, unit=" m")
         check_range("insertion", insertion, 0.0, L, unit=f" m (0 to the robot length {float(L):g} m)") if is_concrete(L) else None
-        base = Actuation(base.tensions, insertion)
-    if not tendons and insertion is not None:
-        raise ValueError("nothing is free: give at least one free tendon (tendons=) or leave the insertion free")
+        if is_general:
+            depths = jnp.broadcast_to(insertion, (n_tubes,))
+            base = GeneralActuation._rebuild(base.tensions, depths, base.displacements, base.driven)
+        else:
+            base = Actuation(base.tensions, insertion)
+    if not tendons and not tubes:
+        raise ValueError("nothing is free: give at least one free tendon (tendons=) or leave a tube's insertion free")
     if not isinstance(bounds, Bounds):
         raise TypeError(f"bounds must be a tdct.Bounds, got {type(bounds).__name__}")
     ins_bounds = (0.0, L) if bounds.insertion is None else bounds.insertion
@@ -978,6 +1094,11 @@ def _problem(
         check_range("bounds.insertion", bounds.insertion, 0.0, float(L), unit=f" m (0 to the robot length {float(L):g} m)")
     if objective is not None and not callable(objective):
         check_choice("objective", objective, OBJECTIVES)
+    if objective == "insertion" and len(tubes) != 1:
+        raise ValueError(
+            f"objective = 'insertion': needs exactly one free tube, got tubes {tuple(t + 1 for t in tubes)} "
+            f"of a robot with {n_tubes} tube(s)"
+        )
     if direction is not None:
         direction = as_array("direction", direction, (3,))
         if is_concrete(direction) and not np.linalg.norm(direction) > 0:
@@ -994,45 +1115,104 @@ def _problem(
         note = target_note("target position", np.asarray(target.position)[..., [AXES.index(a) for a in target.axes]], float(L))
         if note:
             warn_user(note, UnitWarning)
-    free = len(tendons) + (insertion is None)
+    free = len(tendons) + len(tubes)
     if objective is not None and free <= target.size:
+        inputs = (
+            f"tendons {tendons}, tubes {tuple(t + 1 for t in tubes)}"
+            if is_general
+            else (f"tendons {tendons}{'; the insertion fixed' if not tubes else ' and the insertion'}")
+        )
         raise ValueError(
             f"objective = {getattr(objective, '__name__', objective)!r}: nothing to choose: {free} free input(s) "
-            f"(tendons {tendons}{'; the insertion fixed' if insertion is not None else ' and the insertion'}) for {target.size} task "
+            f"({inputs}) for {target.size} task "
             f"coordinate(s) ({describe_task(target)}); an objective picks among solutions only with more free inputs "
             "than task coordinates: free more tendons (tendons=), leave the insertion free, or give fewer target axes "
             "(Target(..., axes=...))"
         )
+    plan = Plan(tuple(t - 1 for t in tendons), tubes, objective, method)
     scale = jnp.maximum(jnp.asarray(bounds.tension[1]), 1.0)
-    lo = [jnp.full(len(tendons), bounds.tension[0]) / scale] + (
-        [jnp.reshape(ins_bounds[0] / L, (1,))] if insertion is None else []
-    )
-    hi = [jnp.full(len(tendons), bounds.tension[1]) / scale] + (
-        [jnp.reshape(ins_bounds[1] / L, (1,))] if insertion is None else []
-    )
+    lo, hi = _input_bounds(robot, base, plan, bounds, ins_bounds, scale)
     prob = Problem(
         robot=robot,
         target=target,
         load=load,
         gravity=jnp.asarray(gravity_vector(gravity)),
         base=base,
-        lo=jnp.concatenate(lo),
-        hi=jnp.concatenate(hi),
+        lo=lo,
+        hi=hi,
         tension_scale=scale,
         solver=solver,
         preferred_insertion=jnp.asarray(preferred, float),
         direction=jnp.full(3, jnp.nan) if direction is None else jnp.asarray(direction, float),
     )
-    plan = Plan(tuple(t - 1 for t in tendons), insertion is None, objective, method)
-    batched = jnp.ndim(target.position) == 2
     if guess is None:
-        forces = jnp.broadcast_to(jnp.asarray(load.force), jnp.shape(target.position))
+        forces = jnp.broadcast_to(jnp.asarray(_tip_force(load)), jnp.shape(target.position))
         start = (
             jax.vmap(lambda p, f: default_start(prob, plan, p, f))(target.position, forces)
             if batched
-            else default_start(prob, plan, target.position, load.force)
+            else default_start(prob, plan, target.position, _tip_force(load))
         )
     else:
-        start = jnp.clip(scaled_inputs(guess, prob, plan), prob.lo, prob.hi)
+        start = jnp.clip(scaled_inputs(base, prob, plan), prob.lo, prob.hi)
         start = jnp.broadcast_to(start, (len(target.position),) + start.shape) if batched else start
-    return prob, plan, start, jnp.full(6, jnp.nan)
+    return prob, plan, start, jnp.full(6 + len(getattr(base, "driven", ())), jnp.nan)
+
+
+def _free_tubes(tubes, insertion, n_tubes: int, is_general: bool) -> tuple:
+    """The free tubes, 0-based, from ``tubes=`` (numbered from 1; default all unless ``insertion``
+    fixes them)."""
+    if tubes is None:
+        return () if insertion is not None else tuple(range(n_tubes))
+    if not is_general:
+        raise ValueError(
+            f"tubes = {tubes!r}: a tdct.Robot's one tube is free unless insertion= fixes it; tubes= is for a GeneralRobot"
+        )
+    if insertion is not None:
+        raise ValueError(f"tubes = {tubes!r} and insertion = {insertion!r}: give one (insertion= fixes every tube)")
+    typed = tubes
+    tubes = (
+        (tubes,)
+        if isinstance(tubes, (int, np.integer))
+        else tuple(tubes)
+        if isinstance(tubes, (tuple, list, np.ndarray))
+        else (None,)
+    )
+    for t in tubes:
+        if isinstance(t, bool) or not isinstance(t, (int, np.integer)) or not 1 <= t <= n_tubes:
+            where = (
+                f"each in [1, {n_tubes}] (tubes[0] to tubes[{n_tubes - 1}] of the robot)"
+                if n_tubes
+                else "but the robot has no tubes"
+            )
+            raise ValueError(f"tubes = {typed!r}: a tube number or a sequence of them, {where}")
+    if len(set(tubes)) != len(tubes):
+        raise ValueError(f"tubes = {tubes!r} names a tube twice")
+    return tuple(t - 1 for t in tubes)
+
+
+def _input_bounds(robot, base, plan: Plan, bounds: Bounds, ins_bounds, scale):
+    """Bounds (lo, hi) of v: tensions over ``scale`` (each capped by its tendon's ``max_tension``
+    on a GeneralRobot), displacements over DISPLACEMENT_SCALE L, insertions over L."""
+    L, k = robot.length, len(plan.tendons)
+    lo, hi = jnp.full(k, bounds.tension[0]) / scale, jnp.full(k, bounds.tension[1]) / scale
+    if isinstance(robot, GeneralRobot):
+        pulled, moved, _ = _split(base, plan)
+        for j in pulled:
+            cap = robot.tendons[plan.tendons[j]].max_tension
+            if cap is None:
+                continue
+            if is_concrete(cap) and is_concrete(bounds.tension) and float(cap) < float(bounds.tension[0]):
+                i = plan.tendons[j]
+                raise ValueError(
+                    f"tendons[{i}].max_tension = {float(cap):g} N is below bounds.tension's lowest "
+                    f"{float(bounds.tension[0]):g} N: lower bounds.tension or free another tendon"
+                )
+            hi = hi.at[j].set(jnp.minimum(bounds.tension[1], cap) / scale)
+        if moved:
+            width = DISPLACEMENT_SCALE * L
+            d_lo, d_hi = (-width, width) if bounds.displacement is None else bounds.displacement
+            lo, hi = lo.at[np.array(moved)].set(d_lo / width), hi.at[np.array(moved)].set(d_hi / width)
+    n = len(plan.tubes)
+    lo = jnp.concatenate([lo, jnp.full(n, ins_bounds[0] / L)])
+    hi = jnp.concatenate([hi, jnp.full(n, ins_bounds[1] / L)])
+    return lo, hi

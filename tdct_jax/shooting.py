@@ -62,13 +62,15 @@ def straight_rod(robot: Robot, act: Actuation, load: TipLoad, gravity, F_c):
 
 
 def scaled(robot: Robot, wrench, F_c):
-    """A base wrench (N(0) [N], M(0) [N m]) as scaled unknowns."""
-    return jnp.concatenate([wrench[:3] / F_c, wrench[3:] / (F_c * robot.length)])
+    """A base wrench (N(0) [N], M(0) [N m]) as scaled unknowns; entries beyond the sixth (a
+    GeneralRobot's displacement-driven tensions [N]) are scaled like forces."""
+    return jnp.concatenate([wrench[:3] / F_c, wrench[3:6] / (F_c * robot.length), wrench[6:] / F_c])
 
 
 def unscaled(robot: Robot, x, F_c):
-    """The base wrench (N(0) [N], M(0) [N m]) of scaled unknowns x (the inverse of ``scaled``)."""
-    return jnp.concatenate([x[:3] * F_c, x[3:] * (F_c * robot.length)])
+    """The base wrench (N(0) [N], M(0) [N m]) of scaled unknowns x, followed by any
+    displacement-driven tensions [N] (the inverse of ``scaled``)."""
+    return jnp.concatenate([x[:3] * F_c, x[3:6] * (F_c * robot.length), x[6:] * F_c])
 
 
 def shoot(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x, F_c, path: bool = False):
@@ -133,15 +135,15 @@ class RootInfo(NamedTuple):
 def root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: SolverOptions):
     """The scaled base unknowns x with a zero tip residual, and RootInfo.
 
-    Newton starts from ``guess`` (a base wrench, (6,)) where it is finite, else from the straight
-    rod. Derivatives of x with respect to every input come from the implicit function theorem.
+    Newton starts from ``guess`` (a base wrench, (6,), optionally followed by the displacement-driven
+    tensions [N]) where it is finite, else from the straight rod. Derivatives of x with respect to every input come from the implicit function theorem.
     """
     F_c = force_scale(robot, act, load, gravity)
     x_straight = straight_rod(robot, act, load, gravity, F_c)
     finite = jnp.all(jnp.isfinite(guess))
     start = scaled(robot, guess, F_c)
-    if x_straight.size > 6:  # a GeneralRobot's displacement-driven tensions
-        start = jnp.concatenate([start, x_straight[6:]])
+    if x_straight.size > start.size:  # a GeneralRobot's displacement-driven tensions, not guessed
+        start = jnp.concatenate([start, x_straight[start.size :]])
     x0 = jnp.where(finite, start, x_straight)
 
     def F_at(lam):
