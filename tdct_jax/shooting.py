@@ -67,8 +67,9 @@ def scaled(robot: Robot, wrench, F_c):
 
 
 def unscaled(robot: Robot, x, F_c):
-    """The base wrench (N(0) [N], M(0) [N m]) of scaled unknowns x (the inverse of ``scaled``)."""
-    return jnp.concatenate([x[:3] * F_c, x[3:] * (F_c * robot.length)])
+    """The base wrench (N(0) [N], M(0) [N m]) of scaled unknowns x (the inverse of ``scaled``);
+    x[6:] (a GeneralRobot's displacement-driven tensions) is not part of it."""
+    return jnp.concatenate([x[:3] * F_c, x[3:6] * (F_c * robot.length)])
 
 
 def shoot(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x, F_c, path: bool = False):
