@@ -49,6 +49,10 @@ GENERAL_INPUTS = ("tensions", "insertions", "displacements", "force", "moment", 
 """A GeneralRobot sweep's input names besides its fields."""
 
 
+LOADS = {"tip_moment": "moment", "point_force": "point_force", "point_moment": "point_moment"}
+"""Loads fields a GeneralRobot sweep sets by name (the tip force: "force" plus the tip mass's weight)."""
+
+
 def _inputs(robot) -> tuple[str, ...]:
     return GENERAL_INPUTS if isinstance(robot, GeneralRobot) else INPUTS
 
@@ -142,7 +146,8 @@ def prepare(robot, act, load, grid, batch, *, gravity, solver, single=False, out
     else:
         points = Points(base, *_columns(robot, act, load, grid, batch, outputs))
     p, g = points.points, base[3]
-    force = np.asarray(p.get("force", _tip(load)[0])) + np.multiply.outer(p.get("tip_mass", 0.0), np.asarray(g))
+    tip_force = load.force if isinstance(load, TipLoad) else load.tip_force
+    force = np.asarray(p.get("force", tip_force)) + np.multiply.outer(p.get("tip_mass", 0.0), np.asarray(g))
     robot.warn_outside_calibration(p.get("tensions", act.tensions), force)
     return points
 
@@ -219,21 +224,15 @@ def configure(base, point):
     """The robot, actuation and load of one point: the base with the point's values swapped in."""
     robot, act, load, gravity, _ = base
     robot = fields.replace(robot, {k: v for k, v in point.items() if k not in _inputs(robot)})
-    tip_force, tip_moment = _tip(load)
-    force = point.get("force", tip_force) + point.get("tip_mass", 0.0) * gravity
-    moment = point.get("moment", tip_moment)
     if isinstance(robot, GeneralRobot):
         got = {k: point.get(k, getattr(act, k)) for k in ("tensions", "insertions", "displacements")}
         act = GeneralActuation(**got, driven=act.driven)
-        point_loads = {k: point.get(k, getattr(load, k)) for k in ("point_force", "point_moment")}
-        return robot, act, dataclasses.replace(load, tip_force=force, tip_moment=moment, **point_loads)
+        force = point.get("force", load.tip_force) + point.get("tip_mass", 0.0) * gravity
+        loads = {k: point.get(name, getattr(load, k)) for k, name in LOADS.items()}
+        return robot, act, dataclasses.replace(load, tip_force=force, **loads)
     act = Actuation(point.get("tensions", act.tensions), point.get("insertion", act.insertion))
-    return robot, act, TipLoad(force, moment)
-
-
-def _tip(load) -> tuple:
-    """The tip force and moment of a TipLoad or Loads."""
-    return (load.force, load.moment) if isinstance(load, TipLoad) else (load.tip_force, load.tip_moment)
+    force = point.get("force", load.force) + point.get("tip_mass", 0.0) * gravity
+    return robot, act, TipLoad(force, point.get("moment", load.moment))
 
 
 def _solve_point(base, point, kernel: Kernel, guess=None):
