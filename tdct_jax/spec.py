@@ -193,7 +193,7 @@ def _values(key: str, value, base, names) -> np.ndarray:
     if not isinstance(value, dict) or "linspace" not in value:
         raise ValueError(f"{key} = {value!r} must be a list of values or a table {{linspace = [first, last, count]}}")
     name = key.split(".", 1)[1]
-    pick = PICKS.get(name)
+    pick = PICKS.get(name) if names is not None else None  # None: not an input of this robot (check_points says so)
     _known(f"{key}: ", value, ("linspace", pick) if pick else ("linspace",))
     spaced = value["linspace"]
     if not (isinstance(spaced, list) and len(spaced) == 3 and all(_is_number(x) for x in spaced[:2])):
