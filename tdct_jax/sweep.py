@@ -223,7 +223,7 @@ def _columns(robot, act, load, grid, batch, outputs: int = 0):
 def configure(base, point):
     """The robot, actuation and load of one point: the base with the point's values swapped in."""
     robot, act, load, gravity, _ = base
-    robot = fields.replace(robot, {k: v for k, v in point.items() if k not in _inputs(robot)})
+    robot = fields.replace(robot, {k: v for k, v in point.items() if _is_field(robot, k)})
     if isinstance(robot, GeneralRobot):
         got = {k: point.get(k, getattr(act, k)) for k in ("tensions", "insertions", "displacements")}
         act = GeneralActuation(**got, driven=act.driven)
@@ -233,6 +233,15 @@ def configure(base, point):
     act = Actuation(point.get("tensions", act.tensions), point.get("insertion", act.insertion))
     force = point.get("force", load.force) + point.get("tip_mass", 0.0) * gravity
     return robot, act, TipLoad(force, point.get("moment", load.moment))
+
+
+def _is_field(robot, name: str) -> bool:
+    """Whether ``name`` is a robot field (a point may also carry inputs and its caller's own values)."""
+    try:
+        fields.check(robot, name)
+    except ValueError:
+        return False
+    return True
 
 
 def _solve_point(base, point, kernel: Kernel, guess=None):
