@@ -1,6 +1,6 @@
 """Sweep throughput: the batch engine against a plain vmap of the single solve, side by side.
 
-Run: python benchmarks/sweep_throughput.py [--quick]
+Run: python benchmarks/sweep_throughput.py [--quick] [--robots [--base PATH]]
 The process splits the CPU into one JAX device per core (JAX_NUM_CPU_DEVICES, unless already set).
 For one device and for all of them, each batch size, and 0% or 1% failing points (400 N with no
 tube: the residual stops being finite), it times the engine (``tdct.sweep`` as shipped: a Broyden
@@ -13,12 +13,22 @@ first call of each (compile included) is reported apart. Both see the same rando
 requested against tips only (one device). Each row also records the largest tip
 difference between the two over the converged points, whether their result codes agree, and the
 process's peak resident memory so far. Writes benchmarks/results/sweep_throughput[_quick].json.
+
+With ``--robots`` it measures instead, on one device, the engine's throughput for the paper robot
+as ``Robot`` and as ``Robot().to_general()`` on the same envelope points, and for the two-segment
+six-tendon robot (robots/two_segment.toml: random tensions 0-1.5 N on each tendon, tip masses
+0-5 g), alternately (issue 23: the general description must not slow the paper robot). With
+``--base PATH`` (a copy of an earlier tdct_jax renamed ``tdct_base``, in PATH) that version's
+``Robot`` sweep joins the rounds, with whether its tips equal today's bit for bit. Writes
+benchmarks/results/sweep_robots[_quick].json.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -28,6 +38,7 @@ from _common import peak_rss_mb, write_result
 
 import tdct_jax as tdct
 from tdct_jax import batch
+from tdct_jax.description import ROBOTS
 
 ENGINE_FIRST_PASS = batch.FIRST_PASS
 
@@ -115,6 +126,45 @@ def output_cost(robot, points, repeats: int, devices) -> list[dict]:
     return rows
 
 
+def robot_sweeps(n: int, repeats: int, device, base_path: str | None) -> list[dict]:
+    """The paper robot's sweep as Robot and as Robot().to_general(), the two-segment robot's, and
+    with ``base_path`` an earlier version's Robot sweep, on the same points, alternately."""
+    paper = envelope(n)
+    general = {k: v for k, v in paper.items() if k != "insertion"} | {"insertions": paper["insertion"][:, None]}
+    rng = np.random.default_rng(1)
+    two = {"tensions": rng.uniform(0, 1.5, (n, 6)), "tip_mass": rng.uniform(0, 0.005, n)}
+    options = dict(progress=False, throw=False, devices=[device])
+    runs = {
+        "Robot": lambda: tdct.sweep(tdct.Robot(), batch=paper, **options),
+        "Robot.to_general()": lambda: tdct.sweep(tdct.Robot().to_general(), batch=general, **options),
+        "two_segment.toml": lambda: tdct.sweep(tdct.Robot.from_toml(ROBOTS / "two_segment.toml"), batch=two, **options),
+    }
+    if base_path:
+        sys.path.insert(0, base_path)
+        old = importlib.import_module("tdct_base")
+        runs = {"base Robot": lambda: old.sweep(old.Robot(), batch=paper, **options)} | runs
+    first, results, times = {}, {}, {name: [] for name in runs}
+    for name, run in runs.items():
+        t = time.perf_counter()
+        results[name] = run()
+        first[name] = time.perf_counter() - t
+    for r in range(repeats):
+        for name in list(runs)[:: 1 if r % 2 else -1]:
+            t = time.perf_counter()
+            runs[name]()
+            times[name].append(time.perf_counter() - t)
+    tips = results["Robot"].tip_position
+    rows = []
+    for name, res in results.items():
+        row = dict(robot=name, points=n, solves_per_s=n / float(np.median(times[name])), first_call_s=first[name])
+        row |= dict(failed=int(res.n_failed), mean_iterations=float(res.iterations.mean()))
+        if name != "two_segment.toml":
+            row["max_tip_difference_from_Robot_m"] = float(np.max(np.abs(res.tip_position - tips)))
+        rows.append(row)
+        print(row, flush=True)
+    return rows
+
+
 def load() -> str:
     return Path("/proc/loadavg").read_text().split()[0] if Path("/proc/loadavg").exists() else "?"
 
@@ -123,10 +173,24 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one batch size, two chunk sizes, one repeat")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--robots", action="store_true", help="Robot, Robot.to_general() and two_segment.toml sweeps")
+    parser.add_argument("--base", help="with --robots: folder holding an earlier tdct_jax copied as package tdct_base")
     args = parser.parse_args()
     if "JAX_NUM_CPU_DEVICES" not in os.environ:  # before JAX starts its backend
         jax.config.update("jax_num_cpu_devices", os.cpu_count() or 1)
     repeats = 1 if args.quick else args.repeats
+    if args.robots:
+        load_before = load()
+        rows = robot_sweeps(256 if args.quick else 1024, repeats, jax.devices()[0], args.base)
+        write_result(
+            Path(__file__).parent / "results" / f"sweep_robots{'_quick' if args.quick else ''}.json",
+            steps=tdct.SolverOptions().steps,
+            first_pass=ENGINE_FIRST_PASS,
+            repeats=repeats,
+            load_average_1min=[load_before, load()],
+            rows=rows,
+        )
+        return
     robot = tdct.Robot()
     devices = jax.devices()
     device_sets = [devices[:1]] + ([devices] if len(devices) > 1 else [])

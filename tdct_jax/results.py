@@ -23,13 +23,23 @@ UNITS = {
     "force": "N",
     "moment": "Nm",
     "tip_mass": "kg",
+    "point_force": "N",
+    "point_moment": "Nm",
     "E_silicone": "Pa",
     "E_tube": "Pa",
+    "E": "Pa",
+    "mass": "kg",
+    "angle": "rad",
+    "twist": "rad_per_m",
+    "max_tension": "N",
+    "stiffness": "N",
 }
 
 
 def unit_of(name: str) -> str:
-    """The SI unit of a sweepable input or Robot field, as written in CSV column names."""
+    """The SI unit of a sweepable input or robot field (a GeneralRobot's ``sections[*].E`` by its
+    last part), as written in CSV column names."""
+    name = name.rsplit(".", 1)[-1]
     if name in UNITS:
         return UNITS[name]
     return "kg_per_m3" if name.startswith("density") else "1" if name.startswith("nu") else "m"
@@ -108,6 +118,8 @@ class SweepResult(GridResult):
             M(0) [N m]): as on ``Solution``.
         s, position: arc length [m] and shape [m] at the RK4 nodes (with ``shapes=True``).
         compliance: 3x3 tip compliance [m/N] (with ``compliance=True``; NaN where not converged).
+        tensions: a GeneralRobot's tendon tensions [N], (n_tendons,): the given ones and those
+            found for displacement-driven tendons (slack: exactly 0); None for a Robot.
     """
 
     tip_position: np.ndarray
@@ -119,6 +131,7 @@ class SweepResult(GridResult):
     s: np.ndarray | None = None
     position: np.ndarray | None = None
     compliance: np.ndarray | None = None
+    tensions: np.ndarray | None = None
 
     CSV_COLUMNS = dict(tip_angle="tip_angle_rad", converged="converged", result="result", iterations="iterations")
 

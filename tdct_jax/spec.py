@@ -2,7 +2,7 @@
 
 A spec, SI units throughout (every key but one table of points is optional)::
 
-    # robot = "robot.toml"    # a file of Robot fields beside the spec (it must exist), or a [robot] table; default Table II
+    # robot = "robot.toml"    # a robot file beside the spec (it must exist), or a [robot] table; default Table II
     gravity = true            # true (standard, -y), false, or [gx, gy, gz] in m/s^2
     chunk_size = 64           # configurations per compiled call (default: the platform's)
     shapes = false            # also keep every shape / the 3x3 tip compliance
@@ -19,6 +19,14 @@ A spec, SI units throughout (every key but one table of points is optional)::
     insertion = {linspace = [0.0, 0.16, 17]}                 # first, last, count
     tensions = {linspace = [0.0, 10.0, 11], tendons = [1]}   # tendon 1 swept, the others as in [base]
     tip_mass = [0.0, 0.02, 0.05]                             # explicit values; vectors as lists of lists
+
+The robot file may be a general robot file (``[[sections]]``, ``[[tendons]]``, ...; read by
+``tdct.Robot.from_toml``). Its spec's [base] takes "tensions" (one per tendon), "insertions" (one
+per tube), "driven" (the displacement-driven tendons, numbered from 1 as ``tendons = [...]``
+is) and their "displacements" [m], "force", "moment", and point loads "point_s" [m],
+"point_force", "point_moment" (lists of [x, y, z]); its [grid] or [batch] the names of
+``tdct.sweep`` for a GeneralRobot (a linspace of "displacements" picks driven tendons by number,
+``tendons = [1]``), fields quoted as TOML keys: ``"sections[*].E" = [50e9, 60e9]``.
 """
 
 from __future__ import annotations
@@ -28,7 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
+from . import general
 from .checks import check_integer, read_toml
+from .description import GeneralRobot
+from .inputs import GeneralActuation, Loads
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .options import SolverOptions
 from .robot import Robot
@@ -37,7 +48,9 @@ from .sweep import check_points
 OPTIONS = ("chunk_size", "shapes", "compliance", "warm_start", "gravity")
 TABLES = ("robot", "base", "solver", "grid", "batch")
 BASE = ("tensions", "insertion", "force", "moment")
-PICKS = {"tensions": "tendons", "force": "components", "moment": "components"}
+GENERAL_BASE = ("tensions", "insertions", "driven", "displacements", "force", "moment", "point_s", "point_force", "point_moment")
+"""[base] keys for a Robot, and for a GeneralRobot."""
+PICKS = {"tensions": "tendons", "displacements": "tendons", "force": "components", "moment": "components"}
 """Vector inputs a linspace can sweep part of: the key that names the entries it sets."""
 COMPONENTS = ("x", "y", "z")
 
@@ -92,16 +105,35 @@ def _arguments(data: dict, folder: Path) -> dict:
         _known("[robot] ", robot, [f.name for f in dataclasses.fields(Robot)])
         robot = _built("robot", Robot, **robot)
     else:
-        raise ValueError(f'robot = {robot!r} must be a file of Robot fields (robot = "robot.toml") or a [robot] table')
+        raise ValueError(f'robot = {robot!r} must be a robot file (robot = "robot.toml") or a [robot] table of Robot fields')
     base = _table(data, "base")
-    _known("[base] ", base, BASE)
-    act = _built(
-        "base", Actuation, tensions=base.get("tensions", np.zeros(robot.n_tendons)), insertion=base.get("insertion", 0.0)
-    )
-    load = _built("base", TipLoad, force=base.get("force", (0.0, 0.0, 0.0)), moment=base.get("moment", (0.0, 0.0, 0.0)))
+    zero = (0.0, 0.0, 0.0)
+    if isinstance(robot, GeneralRobot):
+        _known("[base] ", base, GENERAL_BASE)
+        driven, n = base.get("driven", []), robot.n_tendons
+        if not (isinstance(driven, list) and all(i in range(1, n + 1) and not isinstance(i, bool) for i in driven)):
+            raise ValueError(f"[base] driven = {driven!r} must list tendons numbered 1 to {n} (1 for the first)")
+        act = _built(
+            "base",
+            GeneralActuation,
+            tensions=base.get("tensions", np.zeros(robot.n_tendons)),
+            insertions=base.get("insertions", np.zeros(robot.n_tubes)),
+            displacements=base.get("displacements", np.zeros(len(driven))),
+            driven=tuple(i - 1 for i in driven),
+        )
+        point_loads = {k: base[k] for k in ("point_s", "point_force", "point_moment") if k in base}
+        load = _built("base", Loads, tip_force=base.get("force", zero), tip_moment=base.get("moment", zero), **point_loads)
+    else:
+        _known("[base] ", base, BASE)
+        act = _built(
+            "base", Actuation, tensions=base.get("tensions", np.zeros(robot.n_tendons)), insertion=base.get("insertion", 0.0)
+        )
+        load = _built("base", TipLoad, force=base.get("force", zero), moment=base.get("moment", zero))
     solver = _table(data, "solver")
     _known("[solver] ", solver, [f.name for f in dataclasses.fields(SolverOptions)])
     args = dict(robot=robot, act=act, load=load, solver=_built("solver", SolverOptions, **solver))
+    if isinstance(robot, GeneralRobot):  # counts and ranges that need the robot and the base together
+        _built("base", general.check_arguments, robot=robot, act=act, load=load, solver=args["solver"])
     tables = [name for name in ("grid", "batch") if name in data]
     if len(tables) != 1:
         found = "both" if tables else "neither"
@@ -112,9 +144,16 @@ def _arguments(data: dict, folder: Path) -> dict:
     columns = _table(data, kind)
     if not columns:
         raise ValueError(f"[{kind}] is empty: give at least one input name = values")
-    defaults = dict(tensions=act.tensions, force=load.force, moment=load.moment)
-    args[kind] = {name: _values(f"{kind}.{name}", v, defaults.get(name)) for name, v in columns.items()}
-    _built(kind, lambda: check_points(robot, args.get("grid"), args.get("batch")))  # values, and host memory
+    tendons = tuple(range(1, robot.n_tendons + 1))
+    defaults = dict(
+        tensions=(act.tensions, tendons),
+        force=(base.get("force", zero), COMPONENTS),
+        moment=(base.get("moment", zero), COMPONENTS),
+    )
+    if isinstance(robot, GeneralRobot):
+        defaults["displacements"] = (act.displacements, tuple(i + 1 for i in act.driven))
+    args[kind] = {name: _values(f"{kind}.{name}", v, *defaults.get(name, (None, None))) for name, v in columns.items()}
+    _built(kind, lambda: check_points(robot, act, load, args.get("grid"), args.get("batch")))  # values, host memory
     for name in ("shapes", "compliance", "warm_start"):
         if name in data:
             if not isinstance(data[name], bool):
@@ -142,9 +181,10 @@ def _is_number(x) -> bool:
     return isinstance(x, int | float) and not isinstance(x, bool)
 
 
-def _values(key: str, value, base) -> np.ndarray:
+def _values(key: str, value, base, names) -> np.ndarray:
     """One axis or column: explicit values, or {linspace = [first, last, count]} (setting only the
-    named entries of a vector input, the rest as in the base configuration)."""
+    named entries of a vector input, the rest as in the base configuration; ``names``: its
+    entries' names, tendons numbered from 1)."""
     if isinstance(value, list):
         try:
             return np.asarray(value, dtype=np.float64)
@@ -153,7 +193,7 @@ def _values(key: str, value, base) -> np.ndarray:
     if not isinstance(value, dict) or "linspace" not in value:
         raise ValueError(f"{key} = {value!r} must be a list of values or a table {{linspace = [first, last, count]}}")
     name = key.split(".", 1)[1]
-    pick = PICKS.get(name)
+    pick = PICKS.get(name) if names is not None else None  # None: not an input of this robot (check_points says so)
     _known(f"{key}: ", value, ("linspace", pick) if pick else ("linspace",))
     spaced = value["linspace"]
     if not (isinstance(spaced, list) and len(spaced) == 3 and all(_is_number(x) for x in spaced[:2])):
@@ -162,7 +202,6 @@ def _values(key: str, value, base) -> np.ndarray:
     if pick is None:
         return values
     base = np.asarray(base, dtype=np.float64)
-    names = COMPONENTS if pick == "components" else tuple(range(1, len(base) + 1))
     chosen = value.get(pick)
     if not (isinstance(chosen, list) and chosen and all(c in names and not isinstance(c, bool) for c in chosen)):
         raise ValueError(f"{key}.{pick} = {chosen!r} must list the entries the linspace sets, from {list(names)}")

@@ -3,6 +3,10 @@
 A sweep varies named inputs around a base configuration: the actuation ("tensions" [N],
 "insertion" [m]), the tip load ("force" [N], "moment" [N m], "tip_mass" [kg], whose weight adds
 to the force) and any scalar Robot field ("E_silicone" [Pa], "tendon_offset" [m], ...). A
+``GeneralRobot`` names "tensions", "insertions" (one per tube) and "displacements" (one per
+displacement-driven tendon of the base GeneralActuation), the tip "force", "moment" and
+"tip_mass", the base Loads' "point_force" and "point_moment", and its fields by name
+(fields.py: "sections[*].E", "tendons[3].offset", ...). A
 ``grid`` takes the product of axes; a ``batch`` zips columns of equal length. Results come back
 whole (``sweep``), chunk by chunk (``sweep_chunks``), or streamed to an .npz file (``sweep(out=)``,
 one part per process after ``jax.distributed.initialize``, read back by ``tdct.gather``).
@@ -25,31 +29,60 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from . import __version__, status
+from . import __version__, fields, general, status
 from .batch import Kernel, chunk_lanes, iter_batched, joined, mesh_for
 from .checkpoint import Partial, complete, digest
 from .checks import as_array, check_output, check_range
+from .description import GeneralRobot
+from .inputs import GeneralActuation, Loads
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .mechanics import compliance_and_solution
 from .options import DEFAULT_SOLVER, SolverOptions
 from .results import SweepChunk, SweepResult, part_path
-from .robot import SCALAR_FIELDS, Robot
+from .robot import Robot
 from .shooting import RootInfo, compliance_at, force_scale, quick_root, unscaled
 from .solve import check_inputs, solution_at, solve, tip_angle
 
+INPUTS = ("tensions", "insertion", "force", "moment", "tip_mass")
+"""A Robot sweep's input names besides its fields."""
+GENERAL_INPUTS = ("tensions", "insertions", "displacements", "force", "moment", "tip_mass", "point_force", "point_moment")
+"""A GeneralRobot sweep's input names besides its fields."""
 
-def _point_shape(name: str, robot: Robot) -> tuple[int, ...]:
-    shapes = {"tensions": (robot.n_tendons,), "insertion": (), "force": (3,), "moment": (3,), "tip_mass": ()}
+
+LOADS = {"tip_moment": "moment", "point_force": "point_force", "point_moment": "point_moment"}
+"""Loads fields a GeneralRobot sweep sets by name (the tip force: "force" plus the tip mass's weight)."""
+
+
+def _inputs(robot) -> tuple[str, ...]:
+    return GENERAL_INPUTS if isinstance(robot, GeneralRobot) else INPUTS
+
+
+def _point_shape(name: str, robot, act, load) -> tuple[int, ...]:
+    if isinstance(robot, GeneralRobot):
+        k = load.n_points
+        shapes = dict(
+            tensions=(robot.n_tendons,), insertions=(robot.n_tubes,), displacements=(len(act.driven),),
+            point_force=(k, 3), point_moment=(k, 3),
+        )  # fmt: skip
+        if name in ("point_force", "point_moment") and not k:
+            raise ValueError(f"cannot sweep {name!r}: the base load has no point loads (give tdct.Loads(point_s=...))")
+        if name == "displacements" and not act.driven:
+            raise ValueError("cannot sweep 'displacements': no tendon is displacement-driven (the base act's driven=())")
+    else:
+        shapes = dict(tensions=(robot.n_tendons,), insertion=())
+    shapes |= dict(force=(3,), moment=(3,), tip_mass=())
     if name in shapes:
         return shapes[name]
-    if name in SCALAR_FIELDS:
-        return ()
-    raise ValueError(f"cannot sweep {name!r}: allowed names are {sorted(shapes)} and the Robot fields {list(SCALAR_FIELDS)}")
+    try:
+        fields.check(robot, name)
+    except ValueError as e:
+        raise ValueError(f"cannot sweep {name!r}: not an input ({', '.join(_inputs(robot))}) and {e}") from None
+    return ()
 
 
-def _check_values(name: str, values, robot: Robot) -> np.ndarray:
+def _check_values(name: str, values, robot, act, load) -> np.ndarray:
     """Validates one column (leading axis = points); errors name the field, the point and the range."""
-    shape = _point_shape(name, robot)
+    shape = _point_shape(name, robot, act, load)
     v = np.asarray(values, dtype=np.float64) if np.ndim(values) else np.reshape(values, (1,)).astype(np.float64)
     if len(v) == 0:
         raise ValueError(f"{name}: no values (an empty list); give at least one point")
@@ -62,13 +95,24 @@ def _check_values(name: str, values, robot: Robot) -> np.ndarray:
         if bad.size:
             check_range(f"{name}[{bad[0]}]", v[bad[0]], lo, hi, unit=unit, **kw)
 
+    L = float(robot.length)
     if name in ("tensions", "tip_mass"):
         first_outside(0.0, math.inf, " N" if name == "tensions" else " kg")
-    elif name == "insertion":
-        first_outside(0.0, float(robot.length), f" m (0 to the robot length {float(robot.length):g} m)")
-    elif name in SCALAR_FIELDS:
-        for x in (v.min(), v.max()):
-            dataclasses.replace(robot, **{name: x})
+    if name == "tensions" and isinstance(robot, GeneralRobot):
+        for j, t in enumerate(robot.tendons):
+            bad = np.flatnonzero(v[:, j] > (math.inf if t.max_tension is None else float(t.max_tension)))
+            if bad.size:
+                check_range(
+                    f"tensions[{bad[0]}][{j}]", v[bad[0], j], 0.0, float(t.max_tension), unit=f" N (tendons[{j}].max_tension)"
+                )
+    elif name in ("insertion", "insertions"):
+        first_outside(0.0, L, f" m (0 to the robot length {L:g} m)")
+    elif name not in _inputs(robot):
+        for i in (int(np.argmin(v)), int(np.argmax(v))):
+            try:
+                fields.replace(robot, {name: v[i]})
+            except ValueError as e:
+                raise ValueError(f"{name}[{i}]: {e}") from None
     return v
 
 
@@ -88,16 +132,22 @@ def prepare(robot, act, load, grid, batch, *, gravity, solver, single=False, out
     ``outputs``: bytes per point the caller keeps in memory (for ``check_points``).
     """
     robot = Robot() if robot is None else robot
-    act = Actuation(np.zeros(robot.n_tendons)) if act is None else act
-    load = TipLoad() if load is None else load
-    check_inputs(robot, act, load, solver)
+    if isinstance(robot, GeneralRobot):
+        act = GeneralActuation(np.zeros(robot.n_tendons), np.zeros(robot.n_tubes)) if act is None else act
+        act, load = GeneralActuation.of(act, robot.n_tubes), Loads.of(load)
+        general.check_arguments(robot, act, load, solver)
+    else:
+        act = Actuation(np.zeros(robot.n_tendons)) if act is None else act
+        load = TipLoad() if load is None else load
+        check_inputs(robot, act, load, solver)
     base = (robot, act, load, gravity_vector(gravity), solver)
     if single and grid is None and batch is None:
         points = Points(base, {"insertion": np.asarray(act.insertion).reshape(1)}, (), None)
     else:
-        points = Points(base, *_columns(robot, grid, batch, outputs))
+        points = Points(base, *_columns(robot, act, load, grid, batch, outputs))
     p, g = points.points, base[3]
-    force = np.asarray(p.get("force", load.force)) + np.multiply.outer(p.get("tip_mass", 0.0), np.asarray(g))
+    tip_force = load.force if isinstance(load, TipLoad) else load.tip_force
+    force = np.asarray(p.get("force", tip_force)) + np.multiply.outer(p.get("tip_mass", 0.0), np.asarray(g))
     robot.warn_outside_calibration(p.get("tensions", act.tensions), force)
     return points
 
@@ -107,8 +157,9 @@ def unflatten(arrays: dict, shape: tuple, lead: int = 1) -> dict:
     return {k: v.reshape(shape + v.shape[lead:]) for k, v in arrays.items()}
 
 
-def check_points(robot, grid, batch, outputs: int = 0) -> tuple[dict, tuple]:
-    """Checks the values of ``grid`` or ``batch`` (each axis or column, the batch's lengths) and
+def check_points(robot, act, load, grid, batch, outputs: int = 0) -> tuple[dict, tuple]:
+    """Checks the values of ``grid`` or ``batch`` (each axis or column, the batch's lengths; the
+    shapes and names that depend on the base ``act`` and ``load``, checked ones) and
     that the points fit in host memory, before any is made: returns (the checked axes or
     columns, the sweep's shape). ``outputs``: bytes per point the caller keeps in memory besides
     the inputs."""
@@ -117,7 +168,7 @@ def check_points(robot, grid, batch, outputs: int = 0) -> tuple[dict, tuple]:
     named = grid if grid is not None else batch
     if not isinstance(named, Mapping) or not named:
         raise ValueError("grid / batch must be a non-empty mapping from input names to arrays of values")
-    values = {k: _check_values(k, v, robot) for k, v in named.items()}
+    values = {k: _check_values(k, v, robot, act, load) for k, v in named.items()}
     if batch is not None:
         lengths = {k: len(v) for k, v in values.items()}
         if len(set(lengths.values())) != 1:
@@ -160,9 +211,9 @@ def _bytes(n: float) -> str:
     raise AssertionError  # unreachable
 
 
-def _columns(robot, grid, batch, outputs: int = 0):
+def _columns(robot, act, load, grid, batch, outputs: int = 0):
     """(columns with a leading point axis, sweep shape, grid axes or None)."""
-    values, shape = check_points(robot, grid, batch, outputs)
+    values, shape = check_points(robot, act, load, grid, batch, outputs)
     if batch is not None:
         return values, shape, None
     index = np.meshgrid(*(np.arange(n) for n in shape), indexing="ij")
@@ -172,11 +223,25 @@ def _columns(robot, grid, batch, outputs: int = 0):
 def configure(base, point):
     """The robot, actuation and load of one point: the base with the point's values swapped in."""
     robot, act, load, gravity, _ = base
-    fields = {k: v for k, v in point.items() if k in SCALAR_FIELDS}
-    robot = dataclasses.replace(robot, **fields) if fields else robot
+    robot = fields.replace(robot, {k: v for k, v in point.items() if _is_field(robot, k)})
+    if isinstance(robot, GeneralRobot):
+        got = {k: point.get(k, getattr(act, k)) for k in ("tensions", "insertions", "displacements")}
+        act = GeneralActuation(**got, driven=act.driven)
+        force = point.get("force", load.tip_force) + point.get("tip_mass", 0.0) * gravity
+        loads = {k: point.get(name, getattr(load, k)) for k, name in LOADS.items()}
+        return robot, act, dataclasses.replace(load, tip_force=force, **loads)
     act = Actuation(point.get("tensions", act.tensions), point.get("insertion", act.insertion))
     force = point.get("force", load.force) + point.get("tip_mass", 0.0) * gravity
     return robot, act, TipLoad(force, point.get("moment", load.moment))
+
+
+def _is_field(robot, name: str) -> bool:
+    """Whether ``name`` is a robot field (a point may also carry inputs and its caller's own values)."""
+    try:
+        fields.check(robot, name)
+    except ValueError:
+        return False
+    return True
 
 
 def _solve_point(base, point, kernel: Kernel, guess=None):
@@ -201,6 +266,8 @@ def _solve_point(base, point, kernel: Kernel, guess=None):
         out.update(s=sol.s, position=sol.position)
     if kernel.option("compliance"):
         out["compliance"] = C[:3, :3]
+    if isinstance(robot, GeneralRobot):
+        out["tensions"] = sol.tensions
     return out
 
 
@@ -218,13 +285,17 @@ def _first_pass(robot, act, load, gravity, solver, kernel: Kernel):
         iterations=found.iterations,
         stages=jnp.ones((), jnp.int32),
         residual_norm=jnp.max(jnp.abs(found.residual)),
-        base_wrench=unscaled(robot, found.x, F_c),
+        base_wrench=unscaled(robot, found.x, F_c)[:6],
     )
-    if kernel.option("shapes"):
+    general_driven = isinstance(robot, GeneralRobot) and act.driven
+    if kernel.option("shapes") or general_driven:
         sol = solution_at(
             robot, act, load, gravity, solver, found.x, RootInfo(found.iterations, out["stages"], found.result, None)
         )
+    if kernel.option("shapes"):
         out.update(s=sol.s, position=sol.position)
+    if isinstance(robot, GeneralRobot):  # the tensions found for displacement-driven tendons, slack ones exactly 0
+        out["tensions"] = sol.tensions if general_driven else jnp.asarray(act.tensions, float)
     if kernel.option("compliance"):
         C = compliance_at(robot, act, load, gravity, solver, found.x)[:3, :3]
         out["compliance"] = jnp.where(found.result == status.SUCCESS, C, jnp.nan)
@@ -348,11 +419,9 @@ def _fingerprint(plan: _Plan, lanes: int) -> dict:
     return {
         "tdct_jax": __version__,
         "jax": jax.__version__,
-        **{f"robot.{f.name}": plain(getattr(robot, f.name)) for f in dataclasses.fields(robot)},
-        "act.tensions": plain(act.tensions),
-        "act.insertion": plain(act.insertion),
-        "load.force": plain(load.force),
-        "load.moment": plain(load.moment),
+        **{
+            name: plain(v) for obj, prefix in ((robot, "robot"), (act, "act"), (load, "load")) for name, v in _leaves(obj, prefix)
+        },
         "gravity": plain(gravity),
         **{f"solver.{f.name}": plain(getattr(solver, f.name)) for f in dataclasses.fields(solver)},
         f"{kind}s": list(columns),
@@ -363,6 +432,14 @@ def _fingerprint(plan: _Plan, lanes: int) -> dict:
         "devices": f"{len(devices)} {devices[0].platform}",
         "process": f"{jax.process_index()} of {jax.process_count()}",
     }
+
+
+def _leaves(obj, prefix: str) -> list:
+    """(name, value) of every field of a robot, actuation or load, leaves by their paths
+    (``robot.sections[0].E``), static fields by their names."""
+    static = [f.name for f in dataclasses.fields(obj) if f.metadata.get("static")]
+    leaves = jax.tree_util.tree_leaves_with_path(obj, is_leaf=lambda x: x is None)
+    return [(f"{prefix}{jax.tree_util.keystr(p)}", v) for p, v in leaves] + [(f"{prefix}.{n}", getattr(obj, n)) for n in static]
 
 
 OUT_SUFFIXES = (".npz",)
@@ -443,9 +520,9 @@ def sweep_chunks(robot=None, act=None, load=None, **options) -> Iterator[SweepCh
 
 
 def sweep(
-    robot: Robot | None = None,
-    act: Actuation | None = None,
-    load: TipLoad | None = None,
+    robot: Robot | GeneralRobot | None = None,
+    act: Actuation | GeneralActuation | None = None,
+    load: TipLoad | Loads | None = None,
     *,
     grid: Mapping | None = None,
     batch: Mapping | None = None,
@@ -464,11 +541,17 @@ def sweep(
     """Solves many configurations at once: ``jax.vmap`` of ``tdct.solve`` in bounded chunks.
 
     Args:
-        robot, act, load: the base configuration (defaults: Robot(), no tension, no tube, no tip load).
+        robot, act, load: the base configuration (defaults: Robot(), no tension, no tube, no tip
+            load). A GeneralRobot takes a GeneralActuation (default: no tension, tubes at 0) and
+            Loads (default: none), or an Actuation and a TipLoad.
         grid: {name: values}: every combination of the axes, first axis slowest. Values have a
             leading axis of points: "tensions" (k, n_tendons) [N], "insertion" (k,) [m], "force"
             and "moment" (k, 3) [N], [N m], "tip_mass" (k,) [kg] (weight added to the force),
-            or any scalar Robot field (k,).
+            or any scalar Robot field (k,). For a GeneralRobot "insertions" (k, n_tubes) [m],
+            "displacements" (k, len(act.driven)) [m], "point_force" and "point_moment" (k, n, 3)
+            (the base Loads' n point loads) instead of "insertion", and its fields by name
+            (``tdct_jax.fields``: "sections[*].E" (k,) [Pa], "tendons[3].offset" (k,) [m], ...);
+            the result's ``tensions`` holds each point's tendon tensions.
         batch: {name: values} with the same leading length, zipped point by point.
         warm_start: (grid only) solve along the last axis in order, each solve started from its
             neighbour's base wrench; the other axes run in parallel.
