@@ -1,9 +1,11 @@
+import gc
 import os
 import signal
 import subprocess
 import sys
 import tempfile
 import threading
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -25,6 +27,22 @@ jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
 NO_GRAVITY = None
+MAX_MAPS = 30_000
+"""Memory maps a test process may hold before it drops its compiled programs. Every program XLA:CPU
+compiles keeps a few hundred maps while it is cached; a worker that compiles a hundred programs
+reaches Linux's default limit of 65,530 (vm.max_map_count), and the next compile aborts the process
+("Fatal Python error: Aborted" in the compilation cache's write). Dropped programs come back from
+the session's compilation cache, not from a new compile; no single test compiles enough to go from
+this limit to Linux's."""
+
+
+@pytest.fixture(autouse=True)
+def _drop_compiled_programs_when_maps_run_high():
+    yield
+    maps = Path("/proc/self/maps")
+    if maps.exists() and maps.read_bytes().count(b"\n") > MAX_MAPS:
+        jax.clear_caches()
+        gc.collect()
 
 
 def rel_err(a, b):
