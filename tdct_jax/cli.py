@@ -375,7 +375,7 @@ def _robot(args, general: bool = False) -> Robot | GeneralRobot:
     if isinstance(robot, GeneralRobot) and not general:
         raise ValueError(
             f"--robot {args.robot}: tdct {args.verb} takes the paper's robot only so far (a file of Robot fields); "
-            "a robot file with [[sections]] works with tdct solve and tdct compliance"
+            "a robot file with [[sections]] works with tdct solve, tdct compliance and tdct ik"
         )
     try:
         return fields.replace(robot, dict(getattr(args, "set", [])))
@@ -631,10 +631,19 @@ def _calibrate_command(args) -> int:
     return 0
 
 
+def _depths_mm(act) -> dict:
+    """The tube depth of an actuation in mm, for output: ``insertion_mm`` (the paper robot's
+    Actuation) or ``insertions_mm``, one per tube (a GeneralActuation)."""
+    if isinstance(act, GeneralActuation):
+        return dict(insertions_mm=(1e3 * np.asarray(act.insertions)).tolist())
+    return dict(insertion_mm=1e3 * float(act.insertion))
+
+
 def _ik_command(args) -> int:
     from . import ik
 
-    robot = _robot(args)
+    robot = _robot(args, general=True)
+    general_robot = isinstance(robot, GeneralRobot)
     solver = _solver(args)
     length_mm = 1e3 * float(robot.length)
     check_flag("--max-tension-n", args.max_tension_n, 0.0, unit=" N")
@@ -667,19 +676,24 @@ def _ik_command(args) -> int:
         )
         if note:
             warnings.warn(note, UnitWarning, stacklevel=1)
-    free = (robot.n_tendons if tendons is None else len(tendons)) + (args.insertion_mm is None)
+    n_tubes = robot.n_tubes if general_robot else 1
+    free = (robot.n_tendons if tendons is None else len(tendons)) + n_tubes * (args.insertion_mm is None)
     if args.objective is not None and free <= target.size:
-        fixed = f"; --insertion-mm {args.insertion_mm:g} fixes the tube" if args.insertion_mm is not None else " and the tube"
+        tubes = "" if not n_tubes else " and the tube" if n_tubes == 1 else f" and the {n_tubes} tubes"
+        fixed = f"; --insertion-mm {args.insertion_mm:g} fixes the tube" if args.insertion_mm is not None else tubes
         raise ValueError(
             f"--objective {args.objective}: nothing to choose: {free} free input(s) (tendons "
             f"{','.join(map(str, tendons or range(1, robot.n_tendons + 1)))}{fixed}) for {target.size} target "
             f"component(s) ({ik.describe_task(target)}); an objective needs more free inputs than target components: "
             "give more --tendons, leave out --insertion-mm, or fewer --axes"
         )
+    if args.insertion_mm is not None and n_tubes == 0:
+        raise ValueError(f"--insertion-mm {args.insertion_mm:g}: the robot has no tubes; leave it out")
+    load = TipLoad.from_mass(args.tip_mass_g * 1e-3)
     result = ik.inverse_kinematics(
         robot,
         target,
-        load=TipLoad.from_mass(args.tip_mass_g * 1e-3),
+        load=load,
         tendons=tendons,
         insertion=None if args.insertion_mm is None else args.insertion_mm * 1e-3,
         bounds=ik.Bounds(tension=(0.0, args.max_tension_n)),
@@ -693,7 +707,7 @@ def _ik_command(args) -> int:
     code = int(result.result)
     out = dict(
         tensions_N=np.asarray(result.actuation.tensions).tolist(),
-        insertion_mm=1e3 * float(result.actuation.insertion),
+        **_depths_mm(result.actuation),
         tip_position_mm=(np.asarray(result.tip_position) * 1e3).tolist(),
         tip_angle_deg=float(np.degrees(result.tip_angle)),
         position_error_mm=1e3 * float(result.position_error),
@@ -707,7 +721,7 @@ def _ik_command(args) -> int:
             compliance(
                 robot,
                 result.actuation,
-                TipLoad.from_mass(args.tip_mass_g * 1e-3),
+                load,
                 **dict(gravity=_gravity(args), solver=solver),
                 throw=False,
             )
@@ -718,7 +732,10 @@ def _ik_command(args) -> int:
     else:
         print(f"status:            {out['status']} after {int(result.iterations)} steps")
         print(f"tensions [N]:      {', '.join(f'{t:.4f}' for t in out['tensions_N'])}")
-        print(f"insertion [mm]:    {out['insertion_mm']:.3f}")
+        if "insertion_mm" in out:
+            print(f"insertion [mm]:    {out['insertion_mm']:.3f}")
+        elif out["insertions_mm"]:
+            print(f"insertions [mm]:   {', '.join(f'{d:.3f}' for d in out['insertions_mm'])}")
         tip = out["tip_position_mm"]
         print(
             f"tip position [mm]: x = {tip[0]:.4f}, y = {tip[1]:.4f}, z = {tip[2]:.4f} ({out['position_error_mm']:.2e} mm from the target)"
@@ -727,10 +744,13 @@ def _ik_command(args) -> int:
         if "compliance_along_direction_mm_per_N" in out:
             print(f"compliance along the direction [mm/N]: {out['compliance_along_direction_mm_per_N']:.3f}")
     if args.plot:
-        from .plotting import plot_shape
+        from .plotting import plot_robot, plot_shape
 
         title = f"IK to ({', '.join(f'{x:g}' for x in args.target_mm)}) mm: {out['status']}"
-        plot_shape(result.solution, float(result.actuation.insertion), args.plot, title=title, target=target.position)
+        if general_robot:
+            plot_robot(result.solution, robot, result.actuation, load, args.plot, title=title)
+        else:
+            plot_shape(result.solution, float(result.actuation.insertion), args.plot, title=title, target=target.position)
     if code not in (status.SUCCESS,):
         advice = status.message(code, cli=True, what="the inverse kinematics", max_steps=args.max_steps)
         print(f"tdct: error: {advice}", file=sys.stderr)

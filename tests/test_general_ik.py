@@ -1,10 +1,13 @@
 """Inverse kinematics on a GeneralRobot against truths the IK code did not produce: forward solves
 it must invert, the paper robot's own IK, the robot's reach."""
 
+import json
+
 import numpy as np
 import pytest
 
 import tdct_jax as tdct
+from tdct_jax.cli import main
 from tdct_jax.description import ROBOTS
 
 REACH_M = 1e-9  # 1e-6 mm, as the issue asks
@@ -51,6 +54,20 @@ def test_segment_two_alone_reaches_its_target_and_not_beyond_the_length(two_segm
     far = tdct.inverse_kinematics(two_segment, (0.0, 0.0, 0.5), tendons=(4, 5, 6))
     assert int(far.result) == tdct.status.UNREACHABLE
     assert float(far.position_error) >= 0.1 - 1e-6  # the tip is never further than L = 0.4 m from the base
+
+
+def test_cli_ik_of_a_robot_file_is_the_api_ik(two_segment, capsys):
+    """``tdct ik --robot FILE`` makes the call of the test above (one compiled IK for both)."""
+    act = tdct.GeneralActuation((0.0, 0.0, 0.0, 1.5, 0.0, 0.7), [])
+    tip = np.asarray(tdct.solve(two_segment, act).tip_position)
+    api = tdct.inverse_kinematics(two_segment, tip, tendons=(4, 5, 6))
+    flags = ["--robot", str(ROBOTS / "two_segment.toml"), "--target-mm", ",".join(f"{x:.17g}" for x in 1e3 * tip)]
+    assert main(["ik", *flags, "--tendons", "4,5,6", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(out["tensions_N"], api.actuation.tensions, rtol=1e-9, atol=1e-12)
+    assert out["insertions_mm"] == [] and out["status"] == "SUCCESS"
+    assert main(["ik", *flags, "--insertion-mm", "10"]) == 2
+    assert "--insertion-mm 10: the robot has no tubes" in capsys.readouterr().err
 
 
 def test_paper_robot_as_a_general_robot_gives_the_same_ik(robot):
