@@ -5,7 +5,7 @@ IK with all six tendons free and the least-tension objective (one batched call).
 Reports the fraction reached within 1e-6 mm with status SUCCESS, the fraction within 1e-6 mm
 whatever the status, the median and 95th percentile position error, the wall time per IK (the
 batched call, compile included, and a warm second call on the first 64 targets) and the load
-average. tests/test_general_ik.py runs the same on the first 100.
+average. tests/test_general_ik.py runs the same on the first 40.
 
 Run: python benchmarks/ik_general.py [--n N]
 Writes benchmarks/results/ik_general.json.

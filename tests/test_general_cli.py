@@ -107,7 +107,7 @@ def test_plot_robot_draws_sections_tendons_masses_and_loads(two_segment):
             ["compliance", "--point-load", "-1:0,0,1"],
             "--point-load -1:0,0,1: arc length -1 is outside the allowed range [0, 160] mm",
         ),
-        (["ik", "--robot", TWO, "--target-mm", "0,0,300"], "tdct ik takes the paper's robot only so far"),
+        (["calibrate", "shapes.csv", "--robot", TWO], "tdct calibrate takes the paper's robot only so far"),
     ],
 )
 def test_bad_input_exits_2_before_any_solve(argv, words, capsys, monkeypatch):

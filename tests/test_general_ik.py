@@ -11,9 +11,9 @@ from tdct_jax.cli import main
 from tdct_jax.description import ROBOTS
 
 REACH_M = 1e-9  # 1e-6 mm, as the issue asks
-ROUND_TRIP = 100
-"""Targets in the suite's round trip (81 s with compile, single worker, shared machine): all 1,000
-of acceptance item 6 are benchmarks/ik_general.py's."""
+ROUND_TRIP = 40
+"""Targets in the suite's round trip (all must reach; 100 took 94 s with compile in a full run):
+all 1,000 of acceptance item 6 are benchmarks/ik_general.py's, from the same draw."""
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +25,7 @@ def two_segment():
 def round_trip(two_segment):
     """Random actuations (tensions uniform in [0, 3] N, each tendon slack half the time, gravity on)
     -> forward tips -> least-tension IK with all six tendons free, one batched call."""
-    rng = np.random.default_rng(23)  # benchmarks/ik_general.py's draw: these are its first 100
+    rng = np.random.default_rng(23)  # benchmarks/ik_general.py's draw: these are its first ROUND_TRIP
     tensions = rng.uniform(0, 3, (1000, 6))[:ROUND_TRIP] * (rng.random((1000, 6)) < 0.5)[:ROUND_TRIP]
     tips = np.stack([np.asarray(tdct.solve(two_segment, tdct.GeneralActuation(t, [])).tip_position) for t in tensions])
     return tensions, tips, tdct.inverse_kinematics(two_segment, tdct.Target(tips), objective="tension", throw=False)
@@ -65,7 +65,7 @@ def test_cli_ik_of_a_robot_file_is_the_api_ik(two_segment, capsys):
     assert main(["ik", *flags, "--tendons", "4,5,6", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     np.testing.assert_allclose(out["tensions_N"], api.actuation.tensions, rtol=1e-9, atol=1e-12)
-    assert out["insertions_mm"] == [] and out["status"] == "SUCCESS"
+    assert out["insertions_mm"] == [] and out["status"] == "converged"
     assert main(["ik", *flags, "--insertion-mm", "10"]) == 2
     assert "--insertion-mm 10: the robot has no tubes" in capsys.readouterr().err
 
