@@ -86,7 +86,7 @@ def _cayley(w):
     equal to exp(w^) to first order."""
     W = hat(w)
     c = 4 / (4 + jnp.sum(w**2, -1))[..., None, None]
-    return jnp.eye(3) + c * (W + W @ W / 2)
+    return jnp.broadcast_to(jnp.eye(3), W.shape) + c * (W + W @ W / 2)
 
 
 def _intervals(robot, act, solver):
