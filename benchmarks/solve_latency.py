@@ -2,15 +2,24 @@
 
 Run: python benchmarks/solve_latency.py [--quick] [--repeats 200] [--steps 16]
 Writes benchmarks/results/latency.json (latency_quick.json with --quick: 20 repeats). For steady numbers pin to one core: taskset -c 0 python ...
+
+With --intervals 2,4,8: single against multiple shooting (SolverOptions.intervals) instead, side
+by side in one process, the variants alternated call by call: warm solves of CONFIGS[:3], a
+small vmapped batch, compile times, and the agreement with single shooting of tips, implicit
+derivatives d tip / d(tensions, insertion, E_silicone) and compliance; writes
+benchmarks/results/multiple_shooting.json (multiple_shooting_quick.json with --quick).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import os
 import time
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from _common import timings, write_result
 
@@ -33,8 +42,11 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=200)
     parser.add_argument("--steps", type=int, default=STEPS)
     parser.add_argument("--quick", action="store_true", help="20 repeats")
+    parser.add_argument("--intervals", help="compare single shooting with these K, e.g. 2,4,8")
     args = parser.parse_args()
     repeats = 20 if args.quick else args.repeats
+    if args.intervals:
+        return compare_intervals(args, repeats, [int(k) for k in args.intervals.split(",")])
     out = Path(__file__).parent / "results" / f"latency{'_quick' if args.quick else ''}.json"
 
     robot = tdct.Robot()
@@ -71,6 +83,97 @@ def main() -> None:
         repeats=repeats,
         compile_and_first_solve_s=compile_s,
         configs=rows,
+    )
+    print(f"wrote {out}")
+
+
+def _derivatives(robot, act, load, solver):
+    """d tip position / d(tensions (4), insertion, E_silicone), (3, 6), by implicit differentiation."""
+
+    def tip(v):
+        r = dataclasses.replace(robot, E_silicone=v[5])
+        return tdct.solve(r, tdct.Actuation(v[:4], v[4]), load, solver=solver, throw=False).tip_position
+
+    v = jnp.concatenate([jnp.asarray(act.tensions, float), jnp.array([act.insertion, robot.E_silicone])])
+    return jax.jit(jax.jacfwd(tip))(v) * jnp.concatenate([jnp.ones(4), jnp.array([1.0, robot.E_silicone])])
+
+
+def _relative(a, b):
+    return float(np.max(np.abs(np.asarray(a) - np.asarray(b))) / np.max(np.abs(np.asarray(b))))
+
+
+def compare_intervals(args, repeats, Ks):
+    """Single shooting against multiple shooting with each K in Ks, alternated call by call."""
+    out = Path(__file__).parent / "results" / f"multiple_shooting{'_quick' if args.quick else ''}.json"
+    robot = tdct.Robot()
+    variants = {K: tdct.SolverOptions(steps=args.steps, intervals=K) for K in [1, *Ks]}
+    configs = list(CONFIGS.items())[:3]
+    problems = [(name, tdct.Actuation(t, d), tdct.TipLoad.from_mass(m)) for name, (t, d, m) in configs]
+    compile_s = {}
+    for K, solver in variants.items():
+        t0 = time.perf_counter()
+        jax.block_until_ready(tdct.solve(robot, *problems[0][1:], solver=solver).position)
+        compile_s[K] = time.perf_counter() - t0
+    print(f"uptime: {os.getloadavg()}; compile + first solve [s]: {compile_s}")
+    rows = []
+    for name, act, load in problems:
+        sols = {K: tdct.solve(robot, act, load, solver=s) for K, s in variants.items()}
+        C = {K: tdct.compliance(robot, act, load, solver=s, full=True) for K, s in variants.items()}
+        D = {K: _derivatives(robot, act, load, s) for K, s in variants.items()}
+        times = {K: [] for K in variants}
+        for _ in range(repeats):
+            for K, s in variants.items():
+                times[K].append(timings(lambda act=act, load=load, s=s: tdct.solve(robot, act, load, solver=s).position, 1)[0])
+        med = {K: float(np.median(t)) * 1e3 for K, t in times.items()}
+        row = dict(config=name, median_ms={str(K): m for K, m in med.items()}, ratio_to_single={})
+        for K in Ks:
+            row["ratio_to_single"][str(K)] = med[K] / med[1]
+            row.setdefault("iterations", {})[str(K)] = int(sols[K].iterations)
+            row.setdefault("tip_difference_m", {})[str(K)] = float(np.max(np.abs(sols[K].tip_position - sols[1].tip_position)))
+            row.setdefault("path_difference_m", {})[str(K)] = float(np.max(np.abs(sols[K].position - sols[1].position)))
+            row.setdefault("derivative_relative_difference", {})[str(K)] = _relative(D[K], D[1])
+            row.setdefault("compliance_relative_difference", {})[str(K)] = _relative(C[K], C[1])
+        row["iterations"]["1"] = int(sols[1].iterations)
+        rows.append(row)
+        print(
+            name,
+            "median ms",
+            {K: round(m, 3) for K, m in med.items()},
+            "ratios",
+            {K: round(r, 3) for K, r in row["ratio_to_single"].items()},
+        )
+        print(
+            "  tip diff",
+            row["tip_difference_m"],
+            "deriv",
+            row["derivative_relative_difference"],
+            "C",
+            row["compliance_relative_difference"],
+        )
+
+    # a small batch: lanes already run side by side
+    B = 16
+    rng = np.random.default_rng(0)
+    tensions = rng.uniform(0, 8, (B, 4))
+    insertions = rng.uniform(0, 0.16, B)
+    batch = {}
+    for K, s in variants.items():
+        f = jax.jit(jax.vmap(lambda t, d, s=s: tdct.solve(robot, tdct.Actuation(t, d), solver=s, throw=False).tip_position))
+        jax.block_until_ready(f(tensions, insertions))
+        batch[K] = (f, [])
+    for _ in range(max(repeats // 4, 5)):
+        for f, t in batch.values():
+            t.append(timings(lambda f=f: f(tensions, insertions), 1)[0])
+    batch_ms = {str(K): float(np.median(t)) * 1e3 for K, (f, t) in batch.items()}
+    print(f"vmapped batch of {B}: median ms {batch_ms}; uptime {os.getloadavg()}")
+    write_result(
+        out,
+        steps_per_segment=args.steps,
+        repeats=repeats,
+        load_average=os.getloadavg(),
+        compile_and_first_solve_s={str(K): v for K, v in compile_s.items()},
+        configs=rows,
+        batch=dict(lanes=B, median_ms=batch_ms),
     )
     print(f"wrote {out}")
 

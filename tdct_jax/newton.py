@@ -35,7 +35,7 @@ class Root(NamedTuple):
     result: jax.Array
 
 
-def newton(F, x0, J0, tol, max_iter):
+def newton(F, x0, tol, max_iter):
     """Levenberg-Marquardt-damped Newton on F(x)[0] = 0 with exact ``jax.jacfwd`` Jacobians.
 
     F returns (residual, outputs); Newton also carries the Jacobian of the outputs, taken in the
@@ -43,19 +43,32 @@ def newton(F, x0, J0, tol, max_iter):
     tenfold after each that does not, so the iteration is Newton's (quadratic) near the root and a
     short gradient step far from it; it stops when mu reaches MU_STALL. The first pass evaluates
     x0 itself, so the Jacobian code appears once in the compiled loop and the last Jacobians are
-    at the returned point. J0 (zeros shaped like the Jacobians) only sets their shapes.
+    at the returned point.
 
     Returns:
         (x, residual, jacobians, Newton steps taken, code): SUCCESS, NEWTON_LIMIT, NONFINITE or
         a stall.
     """
 
-    def value_and_jac(x):
+    def linearize(x):
         def fr(x):
             out = F(x)
             return out, out[0]
 
-        return jax.jacfwd(fr, has_aux=True)(x)
+        J, r = jax.jacfwd(fr, has_aux=True)(x)
+        return r, J
+
+    def step(x, r, J, mu):
+        J_r = J[0]
+        return x - jnp.linalg.solve(J_r.T @ J_r + mu * jnp.eye(x.size), J_r.T @ r)
+
+    return damped(linearize, step, x0, tol, max_iter)
+
+
+def damped(linearize, step, x0, tol, max_iter):
+    """The Levenberg-Marquardt loop of ``newton`` for any linearisation: ``linearize(x)`` gives
+    (residual, J), ``step(x, residual, J, mu)`` the next point to try with damping mu; x may be a
+    pytree (e.g. with rotations, updated on SO(3) by ``step``). Returns what ``newton`` returns."""
 
     def not_done(c):
         x, r, J, mu, it, x_try = c
@@ -63,15 +76,14 @@ def newton(F, x0, J0, tol, max_iter):
 
     def body(c):
         x, r, J, mu, it, x_try = c
-        J_try, r_try = value_and_jac(x_try)
+        r_try, J_try = linearize(x_try)
         ok = jnp.all(jnp.isfinite(r_try)) & (jnp.sum(r_try**2) < jnp.sum(r**2))
         x, r, J = jax.tree.map(lambda new, old: jnp.where(ok, new, old), (x_try, r_try, J_try), (x, r, J))
         mu = jnp.where(ok, mu / 10, mu * 10)
-        J_r = J[0]
-        x_try = x - jnp.linalg.solve(J_r.T @ J_r + mu * jnp.eye(x.size), J_r.T @ r)
-        return x, r, J, mu, it + 1, x_try
+        return x, r, J, mu, it + 1, step(x, r, J, mu)
 
-    init = (x0, jnp.full(x0.size, jnp.inf), J0, jnp.asarray(MU_START), 0, x0)
+    r0, J0 = jax.tree.map(lambda o: jnp.zeros(o.shape, o.dtype), jax.eval_shape(linearize, x0))
+    init = (x0, jnp.full(r0.size, jnp.inf), J0, jnp.asarray(MU_START), 0, x0)
     x, r, J, mu, it, _ = lax.while_loop(not_done, body, init)
     code = jnp.where(
         jnp.max(jnp.abs(r)) <= tol,
@@ -115,17 +127,21 @@ def broyden(F, x0, tol, max_iter):
     return x, r, out, it, code.astype(jnp.int32)
 
 
-def continuation(F_at, x0, x_ramp, tol, max_iter, stages=(1, 4, 16)) -> Root:
+def continuation(F_at, x0, x_ramp, tol, max_iter, stages=(1, 4, 16), solve=newton) -> Root:
     """Solves F_at(1)(x)[0] = 0 from x0, ramping the loads in stages when plain Newton fails.
 
     F_at(lam) gives the residual (and outputs, see ``newton``) with every load scaled by lam. The
     ramps of ``stages`` (static) are tried in turn: K equal stages lam = 1/K, ..., 1, each started
     from the last root, the first from lam * x_ramp (a start that is linear in the loads, e.g. the
-    straight rod), or from x0 when K is the first ramp's 1.
+    straight rod), or from x0 when K is the first ramp's 1. ``solve(F_at(lam), guess, tol,
+    max_iter)`` is ``newton`` or one with its returns; x0 may then be a pytree and x_ramp a
+    function of lam.
     """
     ramps = jnp.asarray(stages, jnp.int32)
-    n = x0.size
-    J0 = jax.tree.map(lambda o: jnp.zeros(jnp.shape(o) + (n,)), jax.eval_shape(F_at(1.0), x0))
+    _, r0, J0, _, _ = jax.tree.map(
+        lambda o: jnp.zeros(o.shape, o.dtype), jax.eval_shape(lambda: solve(F_at(1.0), x0, tol, max_iter))
+    )
+    ramp_at = x_ramp if callable(x_ramp) else (lambda lam: lam * x_ramp)
 
     def not_done(c):
         return ~c[-2]
@@ -134,15 +150,16 @@ def continuation(F_at, x0, x_ramp, tol, max_iter, stages=(1, 4, 16)) -> Root:
         x, r, it, J, ramp, stage, _, _ = c
         K = ramps[ramp]
         lam = stage / K
-        guess = jnp.where(stage == 1, jnp.where(K == 1, x0, lam * x_ramp), x)
-        x_new, r_new, J_new, it_new, code = newton(F_at(lam), guess, J0, tol, max_iter)
+        first = jax.tree.map(lambda a, b: jnp.where(K == 1, a, b), x0, ramp_at(lam))
+        guess = jax.tree.map(lambda a, b: jnp.where(stage == 1, a, b), first, x)
+        x_new, r_new, J_new, it_new, code = solve(F_at(lam), guess, tol, max_iter)
         ok = code == status.SUCCESS
         ramp_next = jnp.where(ok, ramp, ramp + 1)
         stage_next = jnp.where(ok, stage + 1, 1)
         done = (ok & (stage == K)) | (ramp_next == len(stages))
         return x_new, r_new, it + it_new, J_new, jnp.where(done, ramp, ramp_next), stage_next, done, code
 
-    init = (x0, jnp.full(n, jnp.inf), jnp.zeros((), jnp.int32), J0, 0, 1, False, status.SUCCESS)
+    init = (x0, jnp.full(r0.size, jnp.inf), jnp.zeros((), jnp.int32), J0, 0, 1, False, status.SUCCESS)
     x, r, it, J, ramp, _, _, code = lax.while_loop(not_done, body, init)
     code = jnp.where(code == _STALLED, status.CONTINUATION_EXHAUSTED, code).astype(jnp.int32)
     return Root(x, r, J, it, ramps[ramp], code)

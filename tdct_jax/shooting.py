@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from . import general
+from . import general, multiple
 from .description import GeneralRobot
 from .integrate import rk4
 from .loads import Actuation, TipLoad
@@ -73,6 +73,21 @@ def unscaled(robot: Robot, x, F_c):
     return jnp.concatenate([x[:3] * F_c, x[3:6] * (F_c * robot.length), x[6:] * F_c])
 
 
+def per_step(seg: Segment, length, n: int):
+    """A segment's parameters broadcast to its n RK4 steps, and the step lengths, (n, ...) each."""
+    return jax.tree.map(lambda a: jnp.broadcast_to(a, (n, *jnp.shape(a))), seg), jnp.full(n, length / n)
+
+
+def integrate(segs: Segment, y: State, h, gravity, path: bool = False):
+    """RK4 from the State y over the steps h with per-step segments ``segs`` (``per_step``),
+    R projected back onto SO(3) after each step; with ``path`` also the States at every node."""
+
+    def project(y):
+        return y._replace(R=orthonormalize(y.R))
+
+    return rk4(lambda seg, y: vector_field(seg, gravity)(y), y, h, segs, project, path)
+
+
 def shoot(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x, F_c, path: bool = False):
     """Integrates both segments from the scaled base unknowns x to the tip.
 
@@ -85,31 +100,21 @@ def shoot(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOp
     back, sil = segments(robot, act, solver)
     L, d, n = robot.length, act.insertion, solver.steps
     y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:] * F_c * L)
-
-    def project(y):
-        return y._replace(R=orthonormalize(y.R))
-
-    def run(segs, y, h):
-        return rk4(lambda seg, y: vector_field(seg, gravity)(y), y, h, segs, project, path)
-
-    def steps(seg, length):
-        return jax.tree.map(lambda a: jnp.broadcast_to(a, (n, *jnp.shape(a))), seg), jnp.full(n, length / n)
-
-    (seg_b, h_b), (seg_s, h_s) = steps(back, d), steps(sil, L - d)
+    (seg_b, h_b), (seg_s, h_s) = per_step(back, d, n), per_step(sil, L - d, n)
     if solver.transition == "balanced" and back.tilt == sil.tilt:
         # one scan over both segments: the state is continuous at s = d, and both segments share
         # the vector field's code, compiled once
         segs, h = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), (seg_b, h_b), (seg_s, h_s))
-        out = run(segs, y0, h)
+        out = integrate(segs, y0, h, gravity, path)
         y_L, ys = out if path else (out, None)
     else:
-        out_b = run(seg_b, y0, h_b)
+        out_b = integrate(seg_b, y0, h_b, gravity, path)
         y_d = out_b[0] if path else out_b
         if solver.transition == "paper":
             jumped = paper_transition(back, sil, y_d)
             inside = (d > 0) & (d < L)
             y_d = jax.tree.map(lambda a, b: jnp.where(inside, a, b), jumped, y_d)
-        out_s = run(seg_s, y_d, h_s)
+        out_s = integrate(seg_s, y_d, h_s, gravity, path)
         y_L = out_s[0] if path else out_s
         ys = jax.tree.map(lambda a, b: jnp.concatenate([a, b[1:]]), out_b[1], out_s[1]) if path else None
     res = jnp.concatenate([(y_L.N - load.force) / F_c, (y_L.M - load.moment) / (F_c * L)])
@@ -131,27 +136,49 @@ class RootInfo(NamedTuple):
     jacobians: tuple
 
 
-@jax.custom_jvp
-def root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: SolverOptions):
-    """The scaled base unknowns x with a zero tip residual, and RootInfo.
-
-    Newton starts from ``guess`` (a base wrench, (6,), optionally followed by the displacement-driven
-    tensions [N]) where it is finite, else from the straight rod. Derivatives of x with respect to every input come from the implicit function theorem.
-    """
-    F_c = force_scale(robot, act, load, gravity)
+def starts(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, F_c):
+    """Newton's scaled start: ``guess`` (``root``) where finite, else the straight rod; and the
+    straight rod's unknowns."""
     x_straight = straight_rod(robot, act, load, gravity, F_c)
     finite = jnp.all(jnp.isfinite(guess))
     start = scaled(robot, guess, F_c)
     if x_straight.size > start.size:  # a GeneralRobot's displacement-driven tensions, not guessed
         start = jnp.concatenate([start, x_straight[start.size :]])
-    x0 = jnp.where(finite, start, x_straight)
+    return jnp.where(finite, start, x_straight), x_straight
+
+
+def loads_at(robot: Robot, act: Actuation, load: TipLoad, gravity, lam):
+    """Actuation, load and gravity with every load times lam (the load continuation's stage)."""
+    act_lam = act.scaled(lam) if isinstance(robot, GeneralRobot) else dataclasses.replace(act, tensions=lam * act.tensions)
+    load_lam = TipLoad(lam * load.force, lam * load.moment) if isinstance(load, TipLoad) else load.scaled(lam)
+    return act_lam, load_lam, lam * gravity
+
+
+def root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: SolverOptions):
+    """The scaled base unknowns x with a zero tip residual, and RootInfo.
+
+    Newton starts from ``guess`` (a base wrench, (6,), optionally followed by the displacement-driven
+    tensions [N]) where it is finite, else from the straight rod. Derivatives of x with respect to
+    every input come from the implicit function theorem. With ``solver.intervals`` > 1 by multiple
+    shooting (``multiple.root``): the same root, and RootInfo's Jacobians single shooting's.
+    """
+    if solver.intervals > 1:
+        u, info = multiple.root(robot, act, load, gravity, guess, solver)
+        return u.x, info
+    return _root(robot, act, load, gravity, guess, solver)
+
+
+@jax.custom_jvp
+def _root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: SolverOptions):
+    """``root`` by single shooting."""
+    F_c = force_scale(robot, act, load, gravity)
+    x0, x_straight = starts(robot, act, load, gravity, guess, F_c)
 
     def F_at(lam):
-        act_lam = act.scaled(lam) if isinstance(robot, GeneralRobot) else dataclasses.replace(act, tensions=lam * act.tensions)
-        load_lam = TipLoad(lam * load.force, lam * load.moment) if isinstance(load, TipLoad) else load.scaled(lam)
+        act_lam, load_lam, gravity_lam = loads_at(robot, act, load, gravity, lam)
 
         def F(x):
-            res, tip = shoot(robot, act_lam, load_lam, lam * gravity, solver, x, F_c)
+            res, tip = shoot(robot, act_lam, load_lam, gravity_lam, solver, x, F_c)
             return res, (tip.p, tip.R)
 
         return F
@@ -193,17 +220,18 @@ def quick_root(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: Sol
     return QuickRoot(x, res, p, R, steps, code)
 
 
-@root.defjvp
+@_root.defjvp
 def _root_jvp(primals, tangents):
     """Implicit differentiation: dx = -J^-1 (d residual / d inputs) d inputs, with Newton's J."""
     robot, act, load, gravity, guess, solver = primals
-    x, info = root(*primals)
+    x, info = _root(*primals)
     J = jacobian_at_root(robot, act, load, gravity, solver, x, info.jacobians[0])
     _, dF = jax.jvp(lambda r, a, l, g: residual(r, a, l, g, solver, x), primals[:4], tangents[:4])
-    return (x, info), (-jnp.linalg.solve(J, dF), jax.tree.map(_zero_tangent, info))
+    return (x, info), (-jnp.linalg.solve(J, dF), jax.tree.map(zero_tangent, info))
 
 
-def _zero_tangent(x):
+def zero_tangent(x):
+    """The zero tangent of x (float0 for integers): for outputs that carry no derivative."""
     x = jnp.asarray(x)
     return jnp.zeros_like(x) if jnp.issubdtype(x.dtype, jnp.inexact) else np.zeros(x.shape, jax.dtypes.float0)
 

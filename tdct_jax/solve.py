@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from . import general, status
+from . import general, multiple, status
 from .checks import as_array, check_range, is_concrete
 from .description import GeneralRobot
 from .inputs import GeneralActuation, Loads
@@ -92,9 +92,14 @@ def solution_and_compliance(robot: Robot, act: Actuation, load: TipLoad, gravity
     The compliance is exact in value but has no derivatives of its own (``tdct.compliance``
     supplies them). Unchecked: ``solve_arguments`` checks the arguments.
     """
-    x, info = root(robot, act, load, gravity, guess, solver)
+    if solver.intervals > 1:  # multiple shooting: the path from the intervals, side by side
+        u, info = multiple.root(robot, act, load, gravity, guess, solver)
+        res, ys = multiple.path(robot, act, load, gravity, solver, u)
+        sol = _assemble(robot, act, solver, ys, res, info)
+    else:
+        x, info = root(robot, act, load, gravity, guess, solver)
+        sol = solution_at(robot, act, load, gravity, solver, x, info)
     J_res, (J_p, J_R) = info.jacobians
-    sol = solution_at(robot, act, load, gravity, solver, x, info)
     return sol, tip_compliance(robot, sol.tip_rotation, J_res, J_p, J_R, force_scale(robot, act, load, gravity))
 
 
@@ -248,10 +253,12 @@ def solve_arguments(robot, act, load, gravity, guess, solver) -> tuple:
     if isinstance(robot, GeneralRobot):
         act, load = GeneralActuation.of(act, robot.n_tubes), Loads.of(load)
         general.check_arguments(robot, act, load, solver)
+        multiple.check(robot, solver)
         guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
         return robot, act, load, *_on_cpu(gravity_vector(gravity), guess), solver
     load = TipLoad() if load is None else load
     check_inputs(robot, act, load, solver)
+    multiple.check(robot, solver)
     robot.warn_outside_calibration(act.tensions, load.force)
     guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
     gravity, guess = _on_cpu(gravity_vector(gravity), guess)

@@ -1,0 +1,118 @@
+"""Multiple shooting (SolverOptions.intervals, issue 24) against single shooting, the established
+and independently validated solver: the same root, so the same tips, paths, implicit derivatives
+and compliance to the solver's tolerance."""
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from conftest import rel_err
+
+import tdct_jax as tdct
+from tdct_jax import status
+
+TIP_TOL = 1e-10
+"""Tips and paths [m]: both roots within the Newton tolerance of the same exact root."""
+DERIVATIVE_TOL = 1e-8
+"""Implicit derivatives and compliance, relative."""
+K = 4
+
+CASES = {
+    "Fig. 6": ((6.0, 0, 0, 0), 0.080, 0.020),
+    "large bending, no tube": ((0, 0, 10.0, 0), 0.0, 0.0),
+    "two tendons, tube deep": ((3.0, 0, 0, 5.0), 0.120, 0.0),
+}
+
+
+@pytest.fixture(scope="module")
+def solutions(robot):
+    """Single (K = 1) and multiple (K) shooting solutions of every case."""
+    out = {}
+    for name, (t, d, m) in CASES.items():
+        act, load = tdct.Actuation(t, d), tdct.TipLoad.from_mass(m)
+        out[name] = [tdct.solve(robot, act, load, solver=tdct.SolverOptions(intervals=k)) for k in (1, K)]
+    return out
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_same_tip_and_path_as_single_shooting(solutions, name):
+    single, multi = solutions[name]
+    assert multi.converged
+    assert multi.position.shape == single.position.shape
+    np.testing.assert_allclose(multi.tip_position, single.tip_position, rtol=0, atol=TIP_TOL)
+    np.testing.assert_allclose(multi.position, single.position, rtol=0, atol=TIP_TOL)
+    np.testing.assert_allclose(multi.rotation, single.rotation, rtol=0, atol=TIP_TOL)
+    np.testing.assert_allclose(multi.s, single.s, rtol=0, atol=1e-15)
+    assert rel_err(multi.total_force, single.total_force) < DERIVATIVE_TOL
+    assert rel_err(multi.moment, single.moment) < DERIVATIVE_TOL
+
+
+def test_large_bending(solutions):
+    single, multi = solutions["large bending, no tube"]
+    assert float(single.tip_rotation[2, 2]) < 0  # the tip tangent bent past 90 degrees
+    np.testing.assert_allclose(multi.tip_angle, single.tip_angle, rtol=0, atol=1e-9)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("k", [2, 8])
+def test_other_interval_counts(robot, k):
+    t, d, m = CASES["large bending, no tube"]
+    act, load = tdct.Actuation(t, d), tdct.TipLoad.from_mass(m)
+    single = tdct.solve(robot, act, load)
+    multi = tdct.solve(robot, act, load, solver=tdct.SolverOptions(intervals=k))
+    np.testing.assert_allclose(multi.position, single.position, rtol=0, atol=TIP_TOL)
+
+
+def _tip_derivatives(robot, act, load, solver):
+    """d tip / d(tensions, insertion, E_silicone) by implicit differentiation, (3, 6)."""
+
+    def tip(v):
+        r = dataclasses.replace(robot, E_silicone=v[5])
+        return tdct.solve(r, tdct.Actuation(v[:4], v[4]), load, solver=solver, throw=False).tip_position
+
+    v = jnp.concatenate([jnp.asarray(act.tensions, float), jnp.array([act.insertion, robot.E_silicone])])
+    return jax.jacfwd(tip)(v)
+
+
+@pytest.mark.slow
+def test_implicit_derivatives_and_compliance(robot):
+    t, d, m = CASES["Fig. 6"]
+    act, load = tdct.Actuation(t, d), tdct.TipLoad.from_mass(m)
+    single, multi = tdct.SolverOptions(), tdct.SolverOptions(intervals=K)
+    D1, DK = (_tip_derivatives(robot, act, load, s) for s in (single, multi))
+    for j in range(D1.shape[1]):  # each input's column on its own scale
+        assert rel_err(DK[:, j], D1[:, j]) < DERIVATIVE_TOL
+    C1, CK = (tdct.compliance(robot, act, load, solver=s, full=True) for s in (single, multi))
+    assert rel_err(CK, C1) < DERIVATIVE_TOL
+
+
+def test_non_convergence_is_reported(robot):
+    t, d, m = CASES["large bending, no tube"]
+    act, load = tdct.Actuation(t, d), tdct.TipLoad.from_mass(m)
+    solver = tdct.SolverOptions(intervals=K, max_iter=1)  # a leaf: the same compiled program
+    sol = tdct.solve(robot, act, load, solver=solver, throw=False)
+    assert not sol.converged
+    assert int(sol.result) in (status.NEWTON_LIMIT, status.CONTINUATION_EXHAUSTED)
+    with pytest.raises(tdct.ConvergenceError):
+        tdct.solve(robot, act, load, solver=solver)
+
+
+@pytest.mark.parametrize(
+    "value, words",
+    [(0, ["intervals = 0", ">= 1"]), (3, ["intervals = 3", "40"]), (2.0, ["intervals = 2.0", "integer"])],
+)
+def test_bad_intervals(value, words):
+    with pytest.raises(ValueError) as e:
+        tdct.SolverOptions(intervals=value)
+    for w in words:
+        assert w in str(e.value)
+
+
+def test_unsupported_combinations(robot):
+    act = tdct.Actuation((1.0, 0, 0, 0), 0.05)
+    with pytest.raises(ValueError, match="intervals = 2 with transition = 'paper'"):
+        tdct.solve(robot, act, solver=tdct.SolverOptions(intervals=2, transition="paper"))
+    with pytest.raises(NotImplementedError, match="intervals = 2: multiple shooting covers the paper's tdct.Robot only"):
+        tdct.solve(robot.to_general(), act, solver=tdct.SolverOptions(intervals=2))
