@@ -14,8 +14,8 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from .calibrate import levenberg_marquardt
 from .ik import Bounds, Target, inverse_kinematics
+from .lm import levenberg_marquardt
 from .loads import Actuation, TipLoad
 from .manipulation import capacity, insertion_optimum, load_capacity, optimal_insertion
 from .mechanics import compliance, compliance_ellipsoid
