@@ -31,7 +31,6 @@ public entry.
 
 from __future__ import annotations
 
-import functools
 import inspect
 
 import jax
@@ -48,8 +47,14 @@ from ..robot import Robot
 from .arguments import _problem
 from .batched import _batched, _track
 from .driver import _solve_ik
+from .objectives import LeastTension as LeastTension
+from .objectives import PreferredInsertion as PreferredInsertion
+from .objectives import Stiffness as Stiffness
+from .options import DEFAULT_IK
+from .options import MAX_STEPS as MAX_STEPS
+from .options import IKOptions as IKOptions
 from .problem import AXES as AXES
-from .problem import DEFAULT_BOUNDS, MAX_STEPS, TOL
+from .problem import DEFAULT_BOUNDS
 from .problem import Bounds as Bounds
 from .problem import IKResult as IKResult
 from .problem import Target as Target
@@ -66,12 +71,8 @@ def inverse_kinematics(
     insertion=None,
     bounds: Bounds = DEFAULT_BOUNDS,
     objective=None,
-    direction=None,
-    preferred_insertion=None,
     guess: Actuation | GeneralActuation | None = None,
-    method: str = "augmented",
-    tol: float = TOL,
-    max_steps: int = MAX_STEPS,
+    ik: IKOptions = DEFAULT_IK,
     gravity=STANDARD_GRAVITY,
     solver: SolverOptions = DEFAULT_SOLVER,
     throw: bool = True,
@@ -95,20 +96,18 @@ def inverse_kinematics(
         bounds: Bounds on the free tensions [N], insertions [m] and displacements [m]; never
             violated (a driven tendon's tension is not bounded).
         objective: among redundant solutions (free inputs beyond the task's dimensions), the one
-            that minimises "stiffness" (the tip compliance along ``direction`` [m/N], or without a
-            direction the largest eigenvalue of its symmetric part), "tension" (total squared
-            tension: no needless co-contraction), "insertion" (squared distance from
-            ``preferred_insertion`` [m], default L / 2; one free tube), or a callable f(Solution, Actuation) ->
-            scalar, differentiable. None: the first solution found. With no more free inputs
-            than task coordinates there is nothing to choose: a ValueError says so.
-        direction: world direction for the "stiffness" objective, (3,), nonzero.
-        preferred_insertion: for the "insertion" objective [m], in [0, L].
+            that minimises ``Stiffness(direction)`` (the tip compliance along the direction
+            [m/N], or without one the largest eigenvalue of its symmetric part),
+            ``LeastTension()`` (total squared tension: no needless co-contraction),
+            ``PreferredInsertion(depth)`` (squared distance from the depth [m], default L / 2;
+            one free tube), or a callable f(Solution, Actuation) -> scalar, differentiable;
+            "stiffness", "tension" and "insertion" name the first three with their defaults.
+            None: the first solution found. With no more free inputs than task coordinates
+            there is nothing to choose: a ValueError says so.
         guess: an Actuation (a GeneralRobot: a GeneralActuation) to start from (free inputs) and
             to take the fixed inputs from.
-        method: "augmented" (shooting unknowns and inputs iterated together) or "nested"
-            (a converged forward solve at every step).
-        tol: tolerance on the scaled task residual (position error / L; orientation error [rad]).
-        max_steps: most IK steps, both phases together (the IK's own limit).
+        ik: ``IKOptions``: the method, the tolerance on the scaled task residual and the step
+            limit (changing the numbers does not compile a new program).
         gravity, solver: as for ``tdct.solve``.
         throw: raise ConvergenceError when the IK failed (not for UNREACHABLE: an unreachable
             target is an answer, the nearest pose); default True, as everywhere.
@@ -117,12 +116,11 @@ def inverse_kinematics(
         IKResult.
     """
     prob, plan, v0, wrench0 = _problem(**_arguments(**locals()))
-    run = functools.partial(_solve_ik, tol=float(tol), max_steps=int(max_steps))
     if jnp.ndim(prob.target.position) == 2:
-        result = _batched(run, prob, plan, v0, wrench0)
+        result = _batched(prob, plan, v0, wrench0)
     else:
-        result, _ = run(prob, v0, wrench0, plan)
-    _check(result, throw, max_steps)
+        result, _ = _solve_ik(prob, v0, wrench0, plan)
+    _check(result, throw, ik.max_steps)
     return result
 
 
@@ -148,11 +146,9 @@ def track(robot: Robot, targets: Target, **options) -> IKResult:
     leaves, tree = jax.tree.flatten(targets)
     own = tuple(i for i, leaf in enumerate(leaves) if jnp.ndim(leaf) >= 1)  # the rest (weights) are shared
     first = jax.tree.unflatten(tree, [leaf[0] if i in own else leaf for i, leaf in enumerate(leaves)])
-    args = _arguments(robot, first, **options)
-    prob, plan, v0, wrench0 = _problem(**args)
-    tol, max_steps = float(args["tol"]), int(args["max_steps"])
-    result = _track(prob, leaves, v0, wrench0, plan, tol, max_steps, tree, own)
-    _check(result, throw, max_steps)
+    prob, plan, v0, wrench0 = _problem(**_arguments(robot, first, **options))
+    result = _track(prob, leaves, v0, wrench0, plan, tree, own)
+    _check(result, throw, prob.options.max_steps)
     return result
 
 

@@ -8,16 +8,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import general
-from ..checks import UnitWarning, as_array, check_choice, check_integer, check_range, is_concrete, target_note, warn_user
+from ..checks import UnitWarning, as_array, check_choice, check_range, is_concrete, target_note, warn_user
 from ..description import GeneralRobot
 from ..inputs import GeneralActuation, Loads
 from ..loads import Actuation, TipLoad, gravity_vector
 from ..solve import check_inputs
+from .objectives import KINDS, SHORTHANDS
+from .options import IKOptions
 from .problem import (
     AXES,
     DISPLACEMENT_SCALE,
-    METHODS,
-    OBJECTIVES,
     Bounds,
     Plan,
     Problem,
@@ -40,12 +40,8 @@ def _problem(
     insertion,
     bounds,
     objective,
-    direction,
-    preferred_insertion,
     guess,
-    method,
-    tol,
-    max_steps,
+    ik,
     gravity,
     solver,
 ):
@@ -94,25 +90,29 @@ def _problem(
     ins_bounds = (0.0, L) if bounds.insertion is None else bounds.insertion
     if bounds.insertion is not None and is_concrete(bounds.insertion):
         check_range("bounds.insertion", bounds.insertion, 0.0, float(L), unit=f" m (0 to the robot length {float(L):g} m)")
-    if objective is not None and not callable(objective):
-        check_choice("objective", objective, OBJECTIVES)
+    if isinstance(objective, str):
+        check_choice("objective", objective, tuple(SHORTHANDS))
+        objective = SHORTHANDS[objective]()
+    if objective is not None and type(objective) not in KINDS and not callable(objective):
+        raise TypeError(
+            f"objective = {objective!r}: expected tdct.Stiffness, tdct.LeastTension, tdct.PreferredInsertion, "
+            f"a callable f(Solution, Actuation) -> scalar, or one of {tuple(SHORTHANDS)}"
+        )
+    if not isinstance(ik, IKOptions):
+        raise TypeError(f"ik must be a tdct.IKOptions, got {type(ik).__name__}")
+    direction = getattr(objective, "direction", None)
+    preferred_insertion = getattr(objective, "depth", None)
+    objective = KINDS.get(type(objective), objective)
     if objective == "insertion" and len(tubes) != 1:
         raise ValueError(
             f"objective = 'insertion': needs exactly one free tube, got tubes {tuple(t + 1 for t in tubes)} "
             f"of a robot with {n_tubes} tube(s)"
         )
     if direction is not None:
-        direction = as_array("direction", direction, (3,))
-        if is_concrete(direction) and not np.linalg.norm(direction) > 0:
-            raise ValueError("direction = [0, 0, 0]: the stiffness direction must be a nonzero vector")
         direction = direction / jnp.linalg.norm(direction)
-    preferred = 0.5 * L if preferred_insertion is None else as_array("preferred_insertion", preferred_insertion, (), unit=" m")
+    preferred = 0.5 * L if preferred_insertion is None else preferred_insertion
     if preferred_insertion is not None and is_concrete(preferred):
-        check_range("preferred_insertion", preferred, 0.0, float(L), unit=" m")
-    check_choice("method", method, METHODS)
-    tol = as_array("tol", tol, ())
-    check_range("tol", tol, 0.0, lo_open=True)
-    check_integer("max_steps", max_steps)
+        check_range("PreferredInsertion.depth", preferred, 0.0, float(L), unit=" m")
     if is_concrete(target.position) and is_concrete(L):
         note = target_note("target position", np.asarray(target.position)[..., [AXES.index(a) for a in target.axes]], float(L))
         if note:
@@ -131,7 +131,7 @@ def _problem(
             "than task coordinates: free more tendons (tendons=), leave the insertion free, or give fewer target axes "
             "(Target(..., axes=...))"
         )
-    plan = Plan(tuple(t - 1 for t in tendons), tubes, objective, method)
+    plan = Plan(tuple(t - 1 for t in tendons), tubes, objective, ik.method)
     scale = jnp.maximum(jnp.asarray(bounds.tension[1]), 1.0)
     lo, hi = _input_bounds(robot, base, plan, bounds, ins_bounds, scale)
     prob = Problem(
@@ -146,6 +146,7 @@ def _problem(
         solver=solver,
         preferred_insertion=jnp.asarray(preferred, float),
         direction=jnp.full(3, jnp.nan) if direction is None else jnp.asarray(direction, float),
+        options=ik,
     )
     if guess is None:
         forces = jnp.broadcast_to(jnp.asarray(_tip_force(load)), jnp.shape(target.position))

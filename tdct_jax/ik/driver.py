@@ -39,8 +39,8 @@ class Tried(NamedTuple):
     steps: jax.Array
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(4, 5, 6))
-def find(prob: Problem, v0, wrench0, n_starts, plan: Plan, tol, max_steps) -> Found:
+@functools.partial(jax.custom_jvp, nondiff_argnums=(4,))
+def find(prob: Problem, v0, wrench0, n_starts, plan: Plan) -> Found:
     """The IK solution in scaled inputs (see the module docstring), from v0 (and the converged or
     NaN base wrench there), then from ``starts`` until one reaches (the nearest pose of them all
     otherwise); its derivatives by implicit differentiation (``_find_jvp``)."""
@@ -55,7 +55,7 @@ def find(prob: Problem, v0, wrench0, n_starts, plan: Plan, tol, max_steps) -> Fo
         v, guess = candidates[k], jnp.where(k == 0, wrench0, jnp.nan)
         problem = (prob.robot, actuation_of(v, prob, plan), prob.load, prob.gravity)
         x, info = root(*problem, guess, prob.solver)
-        r = reach(v, unscaled(prob.robot, x, force_scale(*problem)), prob, plan, tol, max_steps)
+        r = reach(v, unscaled(prob.robot, x, force_scale(*problem)), prob, plan)
         r = r._replace(code=jnp.where(info.result == status.SUCCESS, r.code, info.result))
         rank, best_rank = (
             jnp.where(x.code == status.SUCCESS, 0, jnp.where(x.code == status.UNREACHABLE, 1, 2)) for x in (r, best)
@@ -67,20 +67,20 @@ def find(prob: Problem, v0, wrench0, n_starts, plan: Plan, tol, max_steps) -> Fo
     tried = lax.while_loop(cond, body, Tried(0, none, 0))
     r = tried.best._replace(steps=tried.steps)
     if plan.objective is not None:
-        o = optimise(r.v, r.wrench, prob, plan, tol, max_steps)
+        o = optimise(r.v, r.wrench, prob, plan)
         use = r.code == status.SUCCESS
         r = jax.tree.map(lambda a, b: jnp.where(use, a, b), Reach(o.v, o.wrench, o.e, r.steps + o.steps, o.code), r)
     return Found(r.v, r.wrench, r.steps, r.code)
 
 
 @find.defjvp
-def _find_jvp(plan, tol, max_steps, primals, tangents):
+def _find_jvp(plan, primals, tangents):
     """Implicit differentiation of the optimality conditions at the solution: inputs at a bound
     follow the bound; the others keep e = 0 (the minimum-norm change when the task does not fix
     them) or, with an objective, the KKT conditions grad phi + G^T lam = 0, e = 0."""
     prob, v0, wrench0, n_starts = primals
     dprob = tangents[0]
-    found = find(prob, v0, wrench0, n_starts, plan, tol, max_steps)
+    found = find(prob, v0, wrench0, n_starts, plan)
     v, wrench = found.v, found.wrench
 
     def at(prob, v):
@@ -121,10 +121,10 @@ def _zero_like(x):
     return jnp.zeros_like(x) if jnp.issubdtype(x.dtype, jnp.inexact) else np.zeros(x.shape, jax.dtypes.float0)
 
 
-@functools.partial(jax.jit, static_argnames=("plan", "tol", "max_steps"))
-def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, tol, max_steps, n_starts=STARTS):
+@functools.partial(jax.jit, static_argnames=("plan",))
+def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, n_starts=STARTS):
     """``find``, then the forward solve there and the result's numbers; (IKResult, wrench)."""
-    found = find(prob, v0, wrench0, n_starts, plan, tol, max_steps)
+    found = find(prob, v0, wrench0, n_starts, plan)
     act = actuation_of(found.v, prob, plan)
     sol, C = solution_and_compliance(prob.robot, act, prob.load, prob.gravity, found.wrench, prob.solver)
     if isinstance(act, GeneralActuation):  # the driven tendons' tensions as found

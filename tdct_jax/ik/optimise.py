@@ -42,12 +42,12 @@ class SQPState(NamedTuple):
     done: jax.Array
 
 
-def optimise(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
+def optimise(v0, wrench0, prob: Problem, plan: Plan) -> Reach:
     """Phase 2: min phi(v) subject to e(v) = 0 and the bounds, by SQP (damped BFGS Hessian of the
     Lagrangian, exact active-set subproblems, l1 merit phi / phi_0 + rho |e|_1, and no step that
     leaves the task further than ``DRIFT``). The loop's first pass evaluates the start (phi_0
     there), so the evaluation is compiled once."""
-    n = v0.shape[0]
+    n, tol, max_steps = v0.shape[0], prob.options.tol, prob.options.max_steps
 
     def merit(ev, scale, rho):
         ok = jnp.all(jnp.isfinite(ev.e)) & (ev.code == status.SUCCESS)

@@ -19,13 +19,8 @@ from ..options import SolverOptions
 from ..robot import Robot
 from ..solve import Solution, tip_angle
 from ..tree import pytree, set_fields, static
+from .options import IKOptions
 
-TOL = 1e-10
-"""Default tolerance on the scaled task residual: position error / L (and orientation error [rad])."""
-MAX_STEPS = 60
-"""Default limit on IK steps (both phases together)."""
-OBJECTIVES = ("stiffness", "tension", "insertion")
-METHODS = ("augmented", "nested")
 AXES = "xyz"
 
 
@@ -128,7 +123,7 @@ class Plan(NamedTuple):
 
     tendons: tuple
     tubes: tuple
-    objective: object  # None, a name in OBJECTIVES, or a callable (sol, act) -> scalar
+    objective: object  # None, "stiffness", "tension", "insertion" or a callable (sol, act) -> scalar
     method: str
 
 
@@ -184,6 +179,7 @@ class Problem(NamedTuple):
     solver: SolverOptions
     preferred_insertion: jax.Array  # [m], for the "insertion" objective
     direction: jax.Array  # unit world direction for the "stiffness" objective (NaN: largest eigenvalue)
+    options: IKOptions  # its tol and max_steps are leaves
 
 
 DISPLACEMENT_SCALE = 0.1

@@ -88,9 +88,10 @@ class NestedState(NamedTuple):
     done: jax.Array
 
 
-def reach_nested(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
+def reach_nested(v0, wrench0, prob: Problem, plan: Plan) -> Reach:
     """Phase 1 with a converged forward solve (implicitly differentiated) at every trial. The
     loop's first pass evaluates the start, so the evaluation is compiled once."""
+    tol, max_steps = prob.options.tol, prob.options.max_steps
 
     def cond(c):
         return ~c.done
@@ -143,13 +144,14 @@ class AugmentedState(NamedTuple):
     done: jax.Array
 
 
-def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, tol, max_steps) -> Reach:
+def reach_augmented(v0, wrench0, prob: Problem, plan: Plan) -> Reach:
     """Phase 1 on the shooting unknowns x and the inputs v together: each step is Newton on the
     tip boundary residual r(x, v) = 0 with Gauss-Newton on e for v, from one forward-mode
     Jacobian pass of (r, e) in (x, v); x is eliminated, so the bounded step is taken in v alone.
     ``wrench0`` must be the converged base wrench at v0. The loop's first pass linearises at the
     start, so the Jacobian pass is compiled once."""
     robot, L = prob.robot, prob.robot.length
+    tol, max_steps = prob.options.tol, prob.options.max_steps
     F_s = force_scale(robot, actuation_of(v0, prob, plan), prob.load, prob.gravity)
     n = 6 + len(getattr(prob.base, "driven", ()))  # shooting unknowns: the base wrench, driven tensions
 
