@@ -48,7 +48,9 @@ def test_ik_options_are_leaves_a_new_tol_or_max_steps_compiles_nothing(robot, st
     tilted = again(tdct.IKOptions(), direction=(0.0, -1.0, 0.1))
     same = again(tdct.IKOptions())
     assert _solve_ik._cache_size() == compiled
-    assert int(short.result) == tdct.status.OUTER_LIMIT and int(short.iterations) <= 2  # the limit took effect
+    assert int(short.result) == tdct.status.OUTER_LIMIT and int(short.iterations) < int(
+        stiffest.iterations
+    )  # the limit took effect
     assert int(tight.result) == tdct.status.SUCCESS and float(tight.position_error) <= 1e-12 * float(robot.length)
     assert float(tilted.objective) != float(stiffest.objective)  # the new direction took effect
     for a, b in zip(jax.tree.leaves(same), jax.tree.leaves(stiffest), strict=True):
