@@ -62,7 +62,9 @@ def main() -> None:
     for method in ("augmented", "nested"):
         measure(
             f"cold IK, {method}",
-            lambda m=method: tdct.inverse_kinematics(robot, tdct.Target(tips[0]), load=load, method=m).actuation.tensions,
+            lambda m=method: (
+                tdct.inverse_kinematics(robot, tdct.Target(tips[0]), load=load, ik=tdct.IKOptions(method=m)).actuation.tensions
+            ),
         )
 
     @jax.jit

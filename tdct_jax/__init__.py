@@ -21,7 +21,11 @@ from .description import Section as Section  # noqa: E402
 from .description import Tendon as Tendon  # noqa: E402
 from .description import Tube as Tube  # noqa: E402
 from .ik import Bounds as Bounds  # noqa: E402
+from .ik import IKOptions as IKOptions  # noqa: E402
 from .ik import IKResult as IKResult  # noqa: E402
+from .ik import LeastTension as LeastTension  # noqa: E402
+from .ik import PreferredInsertion as PreferredInsertion  # noqa: E402
+from .ik import Stiffness as Stiffness  # noqa: E402
 from .ik import Target as Target  # noqa: E402
 from .ik import inverse_kinematics as inverse_kinematics  # noqa: E402
 from .ik import track as track  # noqa: E402

@@ -697,11 +697,10 @@ def _ik_command(args) -> int:
         tendons=tendons,
         insertion=None if args.insertion_mm is None else args.insertion_mm * 1e-3,
         bounds=ik.Bounds(tension=(0.0, args.max_tension_n)),
-        objective=args.objective,
-        direction=direction if args.objective == "stiffness" else None,
+        objective=ik.Stiffness(direction) if args.objective == "stiffness" else args.objective,
+        ik=ik.IKOptions(max_steps=args.max_steps),
         gravity=_gravity(args),
         solver=solver,
-        max_steps=args.max_steps,
         throw=False,
     )
     code = int(result.result)

@@ -14,8 +14,8 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from .calibrate import levenberg_marquardt
-from .ik import Bounds, Target, inverse_kinematics
+from .ik import Bounds, LeastTension, Stiffness, Target, inverse_kinematics
+from .lm import levenberg_marquardt
 from .loads import Actuation, TipLoad
 from .manipulation import capacity, insertion_optimum, load_capacity, optimal_insertion
 from .mechanics import compliance, compliance_ellipsoid
@@ -419,7 +419,7 @@ def stiffest_reach(
     common = dict(load=load, tendons=(1,), bounds=Bounds(tension=(0.0, tension)), **options)
     down = np.array([0.0, -1.0, 0.0])
     with _bar(2 * len(heights), "Sec. V.A inverse kinematics", "target", progress) as bar:
-        best = _reach(robot, positions, "y", 1, bar, "stiffest", objective="stiffness", direction=down, **common)
+        best = _reach(robot, positions, "y", 1, bar, "stiffest", objective=Stiffness(down), **common)
         plain = _reach(robot, positions, "y", 1, bar, "tendon 1 alone", insertion=0.0, **common)
         bar.set_postfix_str("")
     return StiffestReach(
@@ -475,10 +475,9 @@ def stiffness_map(
     down = np.array([0.0, -1.0, 0.0])
     out = {}
     with _bar(2 * len(tips), "stiffness map inverse kinematics", "target", progress) as bar:
-        for name, objective in (("least_tension", "tension"), ("stiffest", "stiffness")):
-            extra = dict(direction=down) if objective == "stiffness" else {}
+        for name, objective in (("least_tension", LeastTension()), ("stiffest", Stiffness(down))):
             label = name.replace("_", " ")
-            r = _reach(robot, positions, "yz", chunk, bar, label, tendons=(1, 3), objective=objective, **extra, **options)
+            r = _reach(robot, positions, "yz", chunk, bar, label, tendons=(1, 3), objective=objective, **options)
             ok = r["result"] == 0
             out[name] = (
                 _compliance_along(robot, r, down, TipLoad()).reshape(made.shape),

@@ -67,7 +67,7 @@ def stiffest(robot):
     scope: its program takes tens of seconds to compile, and module fixtures are rebuilt whenever a
     worker comes back to their module)."""
     target = tdct.Target((0.0, HEIGHT, 0.0), axes="y")
-    options = dict(load=tdct.TipLoad.from_mass(MASS), tendons=(1,), objective="stiffness", direction=(0.0, -1.0, 0.0))
+    options = dict(load=tdct.TipLoad.from_mass(MASS), tendons=(1,), objective=tdct.Stiffness(direction=(0.0, -1.0, 0.0)))
     return tdct.inverse_kinematics(robot, target, **options)
 
 

@@ -92,7 +92,8 @@ def test_citation_file():
 
 def test_architecture_names_every_module():
     text = (ROOT / "docs" / "architecture.md").read_text()
-    missing = [p.name for p in sorted((ROOT / "tdct_jax").glob("*.py")) if f"`{p.name}`" not in text]
+    names = [p.relative_to(ROOT / "tdct_jax").as_posix() for p in sorted((ROOT / "tdct_jax").rglob("*.py"))]
+    missing = [name for name in names if f"`{name}`" not in text]
     assert not missing, f"docs/architecture.md does not list {missing}"
 
 

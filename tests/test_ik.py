@@ -80,10 +80,17 @@ def test_tracking_a_path_equals_solving_each_target_alone(robot):
         (lambda r: tdct.inverse_kinematics(r, (0.0, 0.0, 0.1), objective="softest"), ["objective = 'softest'", "stiffness"]),
         (lambda r: tdct.inverse_kinematics(r, (0.0, 0.0, 0.1), tendons=(0, 5)), ["tendons", "[1, 4]"]),
         (
-            lambda r: tdct.inverse_kinematics(r, (0.0, 0.0, 0.1), objective="stiffness", direction=(0, 0, 0)),
-            ["direction", "nonzero"],
+            lambda r: tdct.inverse_kinematics(r, (0.0, 0.0, 0.1), objective=tdct.Stiffness(direction=(0, 0, 0))),
+            ["Stiffness.direction", "nonzero"],
         ),
         (lambda r: tdct.inverse_kinematics(r, (0.0, 0.0, 0.1), tendons=5), ["tendons = 5", "[1, 4]"]),
+        (lambda r: tdct.IKOptions(tol=0.0), ["IKOptions.tol = 0", "(0, inf]"]),
+        (lambda r: tdct.IKOptions(max_steps=2.5), ["IKOptions.max_steps = 2.5", "integer >= 1"]),
+        (lambda r: tdct.IKOptions(method="newton"), ["IKOptions.method = 'newton'", "augmented"]),
+        (
+            lambda r: tdct.inverse_kinematics(r, (0.0, 0.0, 0.1), objective=tdct.PreferredInsertion(depth=0.2)),
+            ["PreferredInsertion.depth = 0.2", "[0, 0.16]"],
+        ),
         (
             lambda r: tdct.inverse_kinematics(r, (0.0, 0.0, 0.1), tendons=1, insertion=0.06, objective="stiffness"),
             ["objective = 'stiffness': nothing to choose: 1 free input(s)", "for 3 task coordinate(s) (x, y, z)", "axes="],

@@ -30,6 +30,33 @@ def test_stiffest_solution_beats_every_solution_of_a_1_mm_insertion_scan(robot, 
     assert len(scan) > 50 and best <= min(scan) * (1 + 1e-6)
 
 
+def test_ik_options_are_leaves_a_new_tol_or_max_steps_compiles_nothing(robot, stiffest):
+    """IKOptions' tol and max_steps, and the objective's direction, are leaves: the stiffest
+    solution's program answers other values of them without compiling again, and answers the
+    original values as it did."""
+    from tdct_jax.ik.driver import _solve_ik
+
+    load, target = tdct.TipLoad.from_mass(MASS), tdct.Target((0.0, HEIGHT, 0.0), axes="y")
+
+    def again(ik, direction=(0.0, -1.0, 0.0)):
+        objective = tdct.Stiffness(direction=direction)
+        return tdct.inverse_kinematics(robot, target, load=load, tendons=(1,), objective=objective, ik=ik, throw=False)
+
+    compiled = _solve_ik._cache_size()
+    tight = again(tdct.IKOptions(tol=1e-12, max_steps=80))
+    short = again(tdct.IKOptions(max_steps=1))
+    tilted = again(tdct.IKOptions(), direction=(0.0, -1.0, 0.1))
+    same = again(tdct.IKOptions())
+    assert _solve_ik._cache_size() == compiled
+    assert int(short.result) == tdct.status.OUTER_LIMIT and int(short.iterations) < int(
+        stiffest.iterations
+    )  # the limit took effect
+    assert int(tight.result) == tdct.status.SUCCESS and float(tight.position_error) <= 1e-12 * float(robot.length)
+    assert float(tilted.objective) != float(stiffest.objective)  # the new direction took effect
+    for a, b in zip(jax.tree.leaves(same), jax.tree.leaves(stiffest), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
 def test_stiffest_solution_is_first_order_optimal(robot, stiffest):
     """KKT from the public Jacobians: the objective's gradient is balanced by the task on the free
     inputs (multiplier lam), and pushes against every input held at a bound."""

@@ -1,0 +1,221 @@
+"""The arguments of ``inverse_kinematics`` checked and turned into a ``Problem``, a ``Plan`` and a
+start."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import general
+from ..checks import UnitWarning, as_array, check_choice, check_range, is_concrete, target_note, warn_user
+from ..description import GeneralRobot
+from ..inputs import GeneralActuation, Loads
+from ..loads import Actuation, TipLoad, gravity_vector
+from ..solve import check_inputs
+from .objectives import KINDS, SHORTHANDS
+from .options import IKOptions
+from .problem import (
+    AXES,
+    DISPLACEMENT_SCALE,
+    Bounds,
+    Plan,
+    Problem,
+    Target,
+    _split,
+    _tip_force,
+    describe_task,
+    scaled_inputs,
+)
+from .starts import default_start
+
+
+def _problem(
+    robot,
+    target,
+    *,
+    load,
+    tendons,
+    tubes,
+    insertion,
+    bounds,
+    objective,
+    guess,
+    ik,
+    gravity,
+    solver,
+):
+    """Checks the arguments; returns (Problem, Plan, start v0, start unknowns (NaN))."""
+    if not isinstance(target, Target):
+        target = Target(target)
+    is_general = isinstance(robot, GeneralRobot)
+    batched = jnp.ndim(target.position) == 2
+    n_t, n_tubes = robot.n_tendons, robot.n_tubes if is_general else 1
+    L = float(robot.length) if is_concrete(robot.length) else robot.length
+    if is_general:
+        load = Loads.of(load)
+        base = GeneralActuation(np.zeros(n_t), np.zeros(n_tubes)) if guess is None else GeneralActuation.of(guess, n_tubes)
+        general.check_arguments(robot, base, load, solver)
+    else:
+        load = TipLoad() if load is None else load
+        base = Actuation(np.zeros(n_t)) if guess is None else guess
+        check_inputs(robot, base, load, solver, batch=batched)
+    typed = tendons
+    if tendons is None:
+        tendons = tuple(range(1, n_t + 1))
+    elif isinstance(tendons, (int, np.integer)):
+        tendons = (tendons,)  # one tendon
+    elif isinstance(tendons, (tuple, list, np.ndarray)):
+        tendons = tuple(tendons)
+    for t in tendons if isinstance(tendons, tuple) else (None,):
+        if isinstance(t, bool) or not isinstance(t, (int, np.integer)) or not 1 <= t <= n_t:
+            where = f"tendons[0] to tendons[{n_t - 1}] of the robot" if is_general else "tendon 1 at body +y"
+            raise ValueError(f"tendons = {typed!r}: a tendon number or a sequence of them, each in [1, {n_t}] ({where})")
+    if len(set(tendons)) != len(tendons):
+        raise ValueError(f"tendons = {tendons!r} names a tendon twice")
+    tubes = _free_tubes(tubes, insertion, n_tubes, is_general)
+    if insertion is not None:
+        shape = (n_tubes,) if is_general and np.ndim(insertion) == 1 else ()
+        insertion = as_array("insertion", insertion, shape, unit=" m")
+        check_range("insertion", insertion, 0.0, L, unit=f" m (0 to the robot length {float(L):g} m)") if is_concrete(L) else None
+        if is_general:
+            depths = jnp.broadcast_to(insertion, (n_tubes,))
+            base = GeneralActuation._rebuild(base.tensions, depths, base.displacements, base.driven)
+        else:
+            base = Actuation(base.tensions, insertion)
+    if not tendons and not tubes:
+        raise ValueError("nothing is free: give at least one free tendon (tendons=) or leave a tube's insertion free")
+    if not isinstance(bounds, Bounds):
+        raise TypeError(f"bounds must be a tdct.Bounds, got {type(bounds).__name__}")
+    ins_bounds = (0.0, L) if bounds.insertion is None else bounds.insertion
+    if bounds.insertion is not None and is_concrete(bounds.insertion):
+        check_range("bounds.insertion", bounds.insertion, 0.0, float(L), unit=f" m (0 to the robot length {float(L):g} m)")
+    if isinstance(objective, str):
+        check_choice("objective", objective, tuple(SHORTHANDS))
+        objective = SHORTHANDS[objective]()
+    if objective is not None and type(objective) not in KINDS and not callable(objective):
+        raise TypeError(
+            f"objective = {objective!r}: expected tdct.Stiffness, tdct.LeastTension, tdct.PreferredInsertion, "
+            f"a callable f(Solution, Actuation) -> scalar, or one of {tuple(SHORTHANDS)}"
+        )
+    if not isinstance(ik, IKOptions):
+        raise TypeError(f"ik must be a tdct.IKOptions, got {type(ik).__name__}")
+    direction = getattr(objective, "direction", None)
+    preferred_insertion = getattr(objective, "depth", None)
+    objective = KINDS.get(type(objective), objective)
+    if objective == "insertion" and len(tubes) != 1:
+        raise ValueError(
+            f"objective = 'insertion': needs exactly one free tube, got tubes {tuple(t + 1 for t in tubes)} "
+            f"of a robot with {n_tubes} tube(s)"
+        )
+    if direction is not None:
+        direction = direction / jnp.linalg.norm(direction)
+    preferred = 0.5 * L if preferred_insertion is None else preferred_insertion
+    if preferred_insertion is not None and is_concrete(preferred):
+        check_range("PreferredInsertion.depth", preferred, 0.0, float(L), unit=" m")
+    if is_concrete(target.position) and is_concrete(L):
+        note = target_note("target position", np.asarray(target.position)[..., [AXES.index(a) for a in target.axes]], float(L))
+        if note:
+            warn_user(note, UnitWarning)
+    free = len(tendons) + len(tubes)
+    if objective is not None and free <= target.size:
+        inputs = (
+            f"tendons {tendons}, tubes {tuple(t + 1 for t in tubes)}"
+            if is_general
+            else (f"tendons {tendons}{'; the insertion fixed' if not tubes else ' and the insertion'}")
+        )
+        raise ValueError(
+            f"objective = {getattr(objective, '__name__', objective)!r}: nothing to choose: {free} free input(s) "
+            f"({inputs}) for {target.size} task "
+            f"coordinate(s) ({describe_task(target)}); an objective picks among solutions only with more free inputs "
+            "than task coordinates: free more tendons (tendons=), leave the insertion free, or give fewer target axes "
+            "(Target(..., axes=...))"
+        )
+    plan = Plan(tuple(t - 1 for t in tendons), tubes, objective, ik.method)
+    scale = jnp.maximum(jnp.asarray(bounds.tension[1]), 1.0)
+    lo, hi = _input_bounds(robot, base, plan, bounds, ins_bounds, scale)
+    prob = Problem(
+        robot=robot,
+        target=target,
+        load=load,
+        gravity=jnp.asarray(gravity_vector(gravity)),
+        base=base,
+        lo=lo,
+        hi=hi,
+        tension_scale=scale,
+        solver=solver,
+        preferred_insertion=jnp.asarray(preferred, float),
+        direction=jnp.full(3, jnp.nan) if direction is None else jnp.asarray(direction, float),
+        options=ik,
+    )
+    if guess is None:
+        forces = jnp.broadcast_to(jnp.asarray(_tip_force(load)), jnp.shape(target.position))
+        start = (
+            jax.vmap(lambda p, f: default_start(prob, plan, p, f))(target.position, forces)
+            if batched
+            else default_start(prob, plan, target.position, _tip_force(load))
+        )
+    else:
+        start = jnp.clip(scaled_inputs(base, prob, plan), prob.lo, prob.hi)
+        start = jnp.broadcast_to(start, (len(target.position),) + start.shape) if batched else start
+    return prob, plan, start, jnp.full(6 + len(getattr(base, "driven", ())), jnp.nan)
+
+
+def _free_tubes(tubes, insertion, n_tubes: int, is_general: bool) -> tuple:
+    """The free tubes, 0-based, from ``tubes=`` (numbered from 1; default all unless ``insertion``
+    fixes them)."""
+    if tubes is None:
+        return () if insertion is not None else tuple(range(n_tubes))
+    if not is_general:
+        raise ValueError(
+            f"tubes = {tubes!r}: a tdct.Robot's one tube is free unless insertion= fixes it; tubes= is for a GeneralRobot"
+        )
+    if insertion is not None:
+        raise ValueError(f"tubes = {tubes!r} and insertion = {insertion!r}: give one (insertion= fixes every tube)")
+    typed = tubes
+    tubes = (
+        (tubes,)
+        if isinstance(tubes, (int, np.integer))
+        else tuple(tubes)
+        if isinstance(tubes, (tuple, list, np.ndarray))
+        else (None,)
+    )
+    for t in tubes:
+        if isinstance(t, bool) or not isinstance(t, (int, np.integer)) or not 1 <= t <= n_tubes:
+            where = (
+                f"each in [1, {n_tubes}] (tubes[0] to tubes[{n_tubes - 1}] of the robot)"
+                if n_tubes
+                else "but the robot has no tubes"
+            )
+            raise ValueError(f"tubes = {typed!r}: a tube number or a sequence of them, {where}")
+    if len(set(tubes)) != len(tubes):
+        raise ValueError(f"tubes = {tubes!r} names a tube twice")
+    return tuple(t - 1 for t in tubes)
+
+
+def _input_bounds(robot, base, plan: Plan, bounds: Bounds, ins_bounds, scale):
+    """Bounds (lo, hi) of v: tensions over ``scale`` (each capped by its tendon's ``max_tension``
+    on a GeneralRobot), displacements over DISPLACEMENT_SCALE L, insertions over L."""
+    L, k = robot.length, len(plan.tendons)
+    lo, hi = jnp.full(k, bounds.tension[0]) / scale, jnp.full(k, bounds.tension[1]) / scale
+    if isinstance(robot, GeneralRobot):
+        pulled, moved, _ = _split(base, plan)
+        for j in pulled:
+            cap = robot.tendons[plan.tendons[j]].max_tension
+            if cap is None:
+                continue
+            if is_concrete(cap) and is_concrete(bounds.tension) and float(cap) < float(bounds.tension[0]):
+                i = plan.tendons[j]
+                raise ValueError(
+                    f"tendons[{i}].max_tension = {float(cap):g} N is below bounds.tension's lowest "
+                    f"{float(bounds.tension[0]):g} N: lower bounds.tension or free another tendon"
+                )
+            hi = hi.at[j].set(jnp.minimum(bounds.tension[1], cap) / scale)
+        if moved:
+            width = DISPLACEMENT_SCALE * L
+            d_lo, d_hi = (-width, width) if bounds.displacement is None else bounds.displacement
+            lo, hi = lo.at[np.array(moved)].set(d_lo / width), hi.at[np.array(moved)].set(d_hi / width)
+    n = len(plan.tubes)
+    lo = jnp.concatenate([lo, jnp.full(n, ins_bounds[0] / L)])
+    hi = jnp.concatenate([hi, jnp.full(n, ins_bounds[1] / L)])
+    return lo, hi

@@ -1,0 +1,81 @@
+"""Many targets: a batch of them through the batch engine (or one vmap when traced), and a
+sequence of them tracked as one compiled scan."""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from .. import status
+from ..batch import Kernel, default_chunk_size, lanes_per_call, run_batched
+from ..checks import is_concrete
+from .driver import _solve_ik
+from .problem import IKResult, Plan, Problem, _tip_force, scaled_inputs
+from .starts import STARTS
+
+CHUNK_SIZE = 64
+"""Targets per compiled call of a batched IK on the CPU (other platforms: ``batch.CHUNK_SIZES``).
+Targets that miss from their first start run again from every start, padded to this many lanes so
+as to reuse the compiled program: a round trip over 1,000 targets took 81 s at 256 lanes against
+55 s at 64 (tests/test_ik.py, compile included)."""
+
+
+def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
+    """Many targets (a leading axis on ``prob.target``, and on ``prob.load`` when it has one).
+    With concrete values they run through the batch engine in chunks, each target from its first
+    start only; those that did not reach run again from every start, so that a few hard targets
+    do not hold up the rest. Traced (inside the caller's jit or vmap): one vmap, every start."""
+    loads = jnp.ndim(_tip_force(prob.load)) == 2
+    per = (prob.target, prob.load if loads else None)
+    if not all(is_concrete(x) for x in jax.tree.leaves((prob, v0))):
+        return jax.vmap(lambda per, v: _solve_ik(_one(prob, per), v, wrench0, plan)[0])(per, v0)
+    leaves, tree = jax.tree.flatten(per)
+    own = tuple(i for i, leaf in enumerate(leaves) if np.ndim(leaf) >= 1)  # the rest (weights) are shared
+    points = {f"in{i}": np.asarray(leaves[i]) for i in own} | {"v0": np.asarray(v0)}
+    kernel = Kernel(_ik_point, (("plan", plan), ("tree", tree), ("own", own)))
+    base = (prob._replace(target=None, load=None if loads else prob.load), wrench0, leaves)
+    chunk = CHUNK_SIZE if jax.default_backend() == "cpu" else default_chunk_size()
+    out = run_batched(kernel, base, points | {"starts": np.ones(len(v0), np.int32)}, chunk_size=chunk, progress=False)
+    again = np.flatnonzero(out[".result"] != status.SUCCESS)
+    if again.size:  # padded to the first pass's chunk, whose compiled program it reuses
+        rows = np.concatenate([again, np.full(max(lanes_per_call(len(v0), chunk) - again.size, 0), again[-1])])
+        retry = {k: v[rows] for k, v in points.items()} | {"starts": np.full(rows.size, STARTS, np.int32)}
+        for k, v in run_batched(kernel, base, retry, chunk_size=chunk, progress=False).items():
+            out[k][again] = v[: again.size]
+    shape = jax.eval_shape(
+        lambda: _solve_ik(_one(prob, jax.tree.map(lambda a: a[0] if jnp.ndim(a) else a, per)), v0[0], wrench0, plan)[0]
+    )
+    paths, tree = jax.tree_util.tree_flatten_with_path(shape)
+    return jax.tree.unflatten(tree, [jnp.asarray(out[jax.tree_util.keystr(path)]) for path, _ in paths])
+
+
+def _one(prob: Problem, per) -> Problem:
+    """The problem of one target of a batch: its target, and its load where each has its own."""
+    target, load = per
+    return prob._replace(target=target, load=prob.load if load is None else load)
+
+
+def _ik_point(base, point, kernel: Kernel) -> dict:
+    prob, wrench0, leaves = base
+    own = kernel.option("own")
+    leaves = [point[f"in{i}"] if i in own else leaf for i, leaf in enumerate(leaves)]
+    prob = _one(prob, jax.tree.unflatten(kernel.option("tree"), leaves))
+    result = _solve_ik(prob, point["v0"], wrench0, kernel.option("plan"), n_starts=point["starts"])[0]
+    return {jax.tree_util.keystr(path): leaf for path, leaf in jax.tree_util.tree_flatten_with_path(result)[0]}
+
+
+@functools.partial(jax.jit, static_argnames=("plan", "tree", "own"))
+def _track(prob, leaves, v0, wrench0, plan, tree, own):
+    def step(carry, xs):
+        v, wrench = carry
+        target = jax.tree.unflatten(tree, [xs[own.index(i)] if i in own else leaf for i, leaf in enumerate(leaves)])
+        result, wrench_new = _solve_ik(prob._replace(target=target), v, wrench, plan)
+        ok = result.result == status.SUCCESS
+        v_new = scaled_inputs(result.actuation, prob, plan)
+        return (jnp.where(ok, v_new, v), jnp.where(ok, wrench_new, wrench)), result
+
+    return lax.scan(step, (v0, wrench0), [leaves[i] for i in own])[1]

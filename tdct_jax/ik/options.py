@@ -1,0 +1,44 @@
+"""How the inverse kinematics computes: ``IKOptions``, accepted as ``ik=`` by ``inverse_kinematics``
+and ``track`` beside ``solver=``."""
+
+from __future__ import annotations
+
+from ..checks import as_array, check_choice, check_integer, check_range, is_concrete
+from ..tree import pytree, set_fields, static
+
+TOL = 1e-10
+"""Default tolerance on the scaled task residual: position error / L (and orientation error [rad])."""
+MAX_STEPS = 60
+"""Default limit on IK steps (both phases together)."""
+METHODS = ("augmented", "nested")
+
+
+@pytree
+class IKOptions:
+    """The IK iteration. ``method`` shapes the compiled program; ``tol`` and ``max_steps`` are
+    leaves, so changing them does not compile a new one.
+
+    Attributes:
+        method: how phase 1 evaluates a step: "augmented" (shooting unknowns and inputs iterated
+            together) or "nested" (a converged forward solve at every step).
+        tol: tolerance on the scaled task residual (position error / L; orientation error [rad]),
+            > 0.
+        max_steps: most IK steps, both phases together, an integer >= 1.
+    """
+
+    method: str = static(default="augmented")
+    tol: float = TOL
+    max_steps: int = MAX_STEPS
+
+    def __post_init__(self):
+        check_choice("IKOptions.method", self.method, METHODS)
+        if is_concrete(self.tol):
+            tol = as_array("IKOptions.tol", self.tol, ())
+            check_range("IKOptions.tol", tol, 0.0, lo_open=True)
+            set_fields(self, tol=float(tol))
+        if is_concrete(self.max_steps):
+            set_fields(self, max_steps=check_integer("IKOptions.max_steps", self.max_steps))
+
+
+DEFAULT_IK = IKOptions()
+"""The defaults of ``ik=``."""
