@@ -90,12 +90,12 @@ def shoot(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOp
         return y._replace(R=orthonormalize(y.R))
 
     def run(segs, y, h):
-        return rk4(lambda seg, y: vector_field(seg, gravity)(y), y, h, segs, project, path)
+        return rk4(lambda seg, y: vector_field(seg, gravity)(y), y, h, segs, n, project, path)
 
-    def steps(seg, length):
-        return jax.tree.map(lambda a: jnp.broadcast_to(a, (n, *jnp.shape(a))), seg), jnp.full(n, length / n)
+    def piece(seg, length):
+        return jax.tree.map(lambda a: jnp.asarray(a)[None], seg), jnp.reshape(length / n, (1,))
 
-    (seg_b, h_b), (seg_s, h_s) = steps(back, d), steps(sil, L - d)
+    (seg_b, h_b), (seg_s, h_s) = piece(back, d), piece(sil, L - d)
     if solver.transition == "balanced" and back.tilt == sil.tilt:
         # one scan over both segments: the state is continuous at s = d, and both segments share
         # the vector field's code, compiled once
