@@ -313,7 +313,7 @@ def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solv
     def interval(c: Carry, k):
         P, b0, b1, dN, dM = k
         y = c.y._replace(N=c.y.N + dN, M=c.y.M + dM)
-        out = rk4(field(P), Carry(y, b0 if helical else None, c.l), jnp.full(n, (b1 - b0) / n), None, project, path)
+        out = rk4(field(P), Carry(y, b0 if helical else None, c.l), jnp.reshape((b1 - b0) / n, (1,)), None, n, project, path)
         end, nodes = out if path else (out, None)
         return end._replace(s=None), nodes
 

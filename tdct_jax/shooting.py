@@ -78,14 +78,21 @@ def per_step(seg: Segment, length, n: int):
     return jax.tree.map(lambda a: jnp.broadcast_to(a, (n, *jnp.shape(a))), seg), jnp.full(n, length / n)
 
 
-def integrate(segs: Segment, y: State, h, gravity, path: bool = False):
-    """RK4 from the State y over the steps h with per-step segments ``segs`` (``per_step``),
-    R projected back onto SO(3) after each step; with ``path`` also the States at every node."""
+def per_piece(seg: Segment, length, n: int):
+    """A segment as one RK4 piece of n steps (``integrate``'s ``steps``): its parameters and step
+    length with a leading axis of 1."""
+    return jax.tree.map(lambda a: jnp.asarray(a)[None], seg), jnp.reshape(length / n, (1,))
+
+
+def integrate(segs: Segment, y: State, h, gravity, path: bool = False, steps: int = 1):
+    """RK4 from the State y over pieces of ``steps`` steps of length h[j] with segments ``segs``
+    (``per_piece``; one step each by default, ``per_step``), R projected back onto SO(3) after each
+    step; with ``path`` also the States at every node."""
 
     def project(y):
         return y._replace(R=orthonormalize(y.R))
 
-    return rk4(lambda seg, y: vector_field(seg, gravity)(y), y, h, segs, project, path)
+    return rk4(lambda seg, y: vector_field(seg, gravity)(y), y, h, segs, steps, project, path)
 
 
 def shoot(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x, F_c, path: bool = False):
@@ -100,21 +107,21 @@ def shoot(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOp
     back, sil = segments(robot, act, solver)
     L, d, n = robot.length, act.insertion, solver.steps
     y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:] * F_c * L)
-    (seg_b, h_b), (seg_s, h_s) = per_step(back, d, n), per_step(sil, L - d, n)
+    (seg_b, h_b), (seg_s, h_s) = per_piece(back, d, n), per_piece(sil, L - d, n)
     if solver.transition == "balanced" and back.tilt == sil.tilt:
         # one scan over both segments: the state is continuous at s = d, and both segments share
         # the vector field's code, compiled once
         segs, h = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), (seg_b, h_b), (seg_s, h_s))
-        out = integrate(segs, y0, h, gravity, path)
+        out = integrate(segs, y0, h, gravity, path, n)
         y_L, ys = out if path else (out, None)
     else:
-        out_b = integrate(seg_b, y0, h_b, gravity, path)
+        out_b = integrate(seg_b, y0, h_b, gravity, path, n)
         y_d = out_b[0] if path else out_b
         if solver.transition == "paper":
             jumped = paper_transition(back, sil, y_d)
             inside = (d > 0) & (d < L)
             y_d = jax.tree.map(lambda a, b: jnp.where(inside, a, b), jumped, y_d)
-        out_s = integrate(seg_s, y_d, h_s, gravity, path)
+        out_s = integrate(seg_s, y_d, h_s, gravity, path, n)
         y_L = out_s[0] if path else out_s
         ys = jax.tree.map(lambda a, b: jnp.concatenate([a, b[1:]]), out_b[1], out_s[1]) if path else None
     res = jnp.concatenate([(y_L.N - load.force) / F_c, (y_L.M - load.moment) / (F_c * L)])

@@ -8,6 +8,10 @@ from scipy.optimize import brentq
 from scipy.special import ellipe, ellipeinc, ellipk, ellipkinc
 
 import tdct_jax as tdct
+from tdct_jax import shooting
+from tdct_jax.loads import gravity_vector
+from tdct_jax.segments import State, vector_field
+from tdct_jax.so3 import orthonormalize
 
 G = np.array([0.0, -9.81, 0.0])
 
@@ -143,6 +147,37 @@ def test_rk4_is_fourth_order(robot):
     e_fine = np.linalg.norm(tips[20] - tips[80])
     print(f"tip error {e_coarse:.3g} m at 10 steps, {e_fine:.3g} m at 20 (against 80): ratio {e_coarse / e_fine:.1f}")
     assert 10 < e_coarse / e_fine < 20
+
+
+def test_rk4_equals_classical_steps_written_out(paper_case):
+    """Both segments in one scan (integrate.rk4 over two pieces) equal classical RK4 written out
+    step by step, each segment with its own vector field, at every node."""
+    robot, act, load, sol = paper_case
+    solver, g = tdct.SolverOptions(steps=4), gravity_vector(tdct.STANDARD_GRAVITY)
+    F_c = shooting.force_scale(robot, act, load, g)
+    x = shooting.scaled(robot, sol.base_wrench, F_c)
+    _, nodes = shooting.shoot(robot, act, load, g, solver, x, F_c, path=True)
+
+    def axpy(a, x, y):
+        return State(*(yi + a * xi for xi, yi in zip(x, y, strict=True)))
+
+    y = State(np.zeros(3), np.eye(3), *np.split(np.asarray(sol.base_wrench), 2))
+    ys = [y]
+    for seg, length in zip(shooting.segments(robot, act, solver), (act.insertion, robot.length - act.insertion), strict=True):
+        f, h = vector_field(seg, g), length / solver.steps
+        for _ in range(solver.steps):
+            k1 = f(y)
+            k2 = f(axpy(h / 2, k1, y))
+            k3 = f(axpy(h / 2, k2, y))
+            k4 = f(axpy(h, k3, y))
+            y = State(*(yi + h / 6 * (a + 2 * b + 2 * c + d) for yi, a, b, c, d in zip(y, k1, k2, k3, k4, strict=True)))
+            y = y._replace(R=orthonormalize(y.R))
+            ys.append(y)
+    np.testing.assert_allclose(nodes.p, np.stack([y.p for y in ys]), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(nodes.R, np.stack([y.R for y in ys]), rtol=0, atol=1e-12)
+    for name in ("N", "M"):
+        ref = np.stack([getattr(y, name) for y in ys])
+        assert rel_err(getattr(nodes, name), ref) < 1e-12
 
 
 def test_rotations_stay_on_so3(paper_case):

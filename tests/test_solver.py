@@ -3,6 +3,8 @@
 import dataclasses
 import importlib
 import logging
+import math
+import re
 
 import jax
 import jax.numpy as jnp
@@ -10,6 +12,8 @@ import numpy as np
 from conftest import rel_err
 
 import tdct_jax as tdct
+from tdct_jax import shooting
+from tdct_jax.loads import gravity_vector
 
 
 def envelope(n, seed=0):
@@ -54,6 +58,52 @@ def test_no_retracing_when_only_values_change(paper_case, caplog):
             tdct.solve(r, tdct.Actuation((tau, 0, 0, 0), 0.01 * tau), load, solver=solver)
     compiles = [r.getMessage() for r in caplog.records if "Compiling" in r.getMessage()]
     assert not any("solution_and_compliance" in m for m in compiles), compiles
+
+
+SEQUENTIAL_BYTES = 512
+"""XLA:CPU runs a loop body's operations one after another when none touches an array over this
+size, and through its thread pool otherwise (ThunkExecutor's execute_sequential_buffer_threshold)."""
+
+
+def _large_arrays_in_loops(hlo: str, limit: int) -> list:
+    """Instructions of compiled HLO text, inside while-loop bodies and conditions, whose result or
+    an operand holds an array of more than ``limit`` bytes."""
+    loops = set(re.findall(r"(?:body|condition)=%?([\w.\-]+)", hlo))
+    size = {"f64": 8, "s64": 8, "f32": 4, "s32": 4, "u32": 4, "pred": 1, "u8": 1, "s8": 1}
+
+    def largest(shape):
+        arrays = re.findall(r"(\w+)\[([\d,]*)\]", shape)
+        return max((size.get(t, 8) * math.prod(int(d) for d in dims.split(",") if d) for t, dims in arrays), default=0)
+
+    found, computation, shapes = [], None, {}
+    for line in hlo.splitlines():
+        if head := re.match(r"^(?:ENTRY )?%?([\w.\-]+) .*\{$", line):
+            computation, shapes = head.group(1), {}
+        elif m := re.match(r"\s*(?:ROOT )?%?([\w.\-]+) = (\(.*?\)|\S+) ([\w\-]+)\(([^)]*)\)", line):
+            name, shape, op, args = m.groups()
+            shapes[name] = shape
+            trivial = op in ("parameter", "get-tuple-element", "tuple", "constant", "bitcast", "while", "call")
+            operands = [shapes.get(a.strip().lstrip("%"), "") for a in args.split(",")]
+            if computation in loops and not trivial and max(map(largest, [shape, *operands])) > limit:
+                found.append(f"{computation}: {name} {shape}")
+    return found
+
+
+def test_newton_pass_loops_run_in_sequence(paper_case):
+    """The loops of a Newton pass (the residual and its forward-mode Jacobian through the RK4 scan
+    over both segments) touch no array over SEQUENTIAL_BYTES: scanning over per-step copies of the
+    segments (3 kB) sent every RK4 step to the thread pool, a third more instructions per solve
+    (docs/performance.md)."""
+    robot, act, load, sol = paper_case
+    g = gravity_vector(tdct.STANDARD_GRAVITY)
+    x = shooting.scaled(robot, sol.base_wrench, shooting.force_scale(robot, act, load, g))
+
+    def jacobian(robot, act, load, g, x):
+        return jax.jacfwd(lambda x: shooting.residual(robot, act, load, g, tdct.SolverOptions(), x))(x)
+
+    hlo = jax.jit(jacobian).lower(robot, act, load, g, x).compile().as_text()
+    assert "while" in hlo
+    assert _large_arrays_in_loops(hlo, SEQUENTIAL_BYTES) == []
 
 
 def test_reverse_and_forward_gradients_agree_with_central_differences(paper_case):
