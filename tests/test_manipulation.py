@@ -37,11 +37,10 @@ def test_capacity_is_differentiable_in_robot_parameters(robot):
     def mass(offset):
         return tdct.capacity(dataclasses.replace(robot, tendon_offset=offset), act).mass
 
-    f = jax.jit(mass)
     r = float(robot.tendon_offset)
-    exact = jax.jit(jax.grad(mass))(r)
+    exact = jax.grad(mass)(r)  # called as the manipulation guide calls it: the same compiled programs
     h = 1e-6
-    central = (f(r + h) - f(r - h)) / (2 * h)
+    central = (mass(r + h) - mass(r - h)) / (2 * h)
     assert exact > 0
     assert abs(exact - central) < 1e-6 * abs(central)
 
