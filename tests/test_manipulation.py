@@ -59,6 +59,7 @@ def test_a_tip_that_cannot_reach_the_height_is_unreachable(robot, capacities):
         tdct.load_capacity(robot, batch=batch, progress=False)
 
 
+@pytest.mark.slow
 def test_optimal_insertion_is_a_stationary_maximum(robot):
     act, load = tdct.Actuation((10.0, 0, 0, 0)), tdct.TipLoad.from_mass(0.05)
     res = tdct.optimal_insertion(robot, act, load, n_curve=9, progress=False)

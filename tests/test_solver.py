@@ -7,6 +7,7 @@ import logging
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from conftest import rel_err
 
 import tdct_jax as tdct
@@ -29,6 +30,7 @@ def batched_solve(robot):
     return jax.jit(jax.vmap(one))
 
 
+@pytest.mark.slow
 def test_converges_over_the_operating_envelope(robot):
     tensions, insertion, force = envelope(200)
     sol = batched_solve(robot)(tensions, insertion, force)
@@ -56,6 +58,7 @@ def test_no_retracing_when_only_values_change(paper_case, caplog):
     assert not any("solution_and_compliance" in m for m in compiles), compiles
 
 
+@pytest.mark.slow
 def test_reverse_and_forward_gradients_agree_with_central_differences(paper_case):
     robot, act, load, _ = paper_case
 
