@@ -8,6 +8,7 @@ grids in chunks with progress, like ``tdct.sweep``.
 from __future__ import annotations
 
 import inspect
+from functools import partial
 from time import perf_counter
 from typing import NamedTuple
 
@@ -102,7 +103,15 @@ def capacity(
     """
     check_inputs(robot, act, TipLoad(), solver)
     max_steps = check_integer("max_steps", max_steps)
-    gravity = gravity_vector(gravity)
+    cap = _capacity(robot, act, height, height_tol, gravity_vector(gravity), solver, max_steps)
+    status.check(cap.result, throw=throw, what="the load capacity", max_steps=max_steps, unreachable=_unreachable(height))
+    return cap
+
+
+@partial(jax.jit, static_argnames=("max_steps",))
+def _capacity(robot, act, height, height_tol, gravity, solver, max_steps) -> Capacity:
+    """``capacity`` without its checks, compiled once per robot structure, solver and ``max_steps``
+    (its loop and root close over new functions at each call, which would otherwise compile again)."""
     load = TipLoad()
 
     def f(m):
@@ -139,9 +148,7 @@ def capacity(
 
     m, (reachable, result, it) = lax.custom_root(f, jnp.zeros(()), search, lambda g, y: y / g(jnp.ones_like(y)), has_aux=True)
     reachable = reachable > 0.5
-    cap = Capacity(jnp.where(reachable, m, 0.0), reachable, it.astype(jnp.int32), jnp.round(result).astype(jnp.int32))
-    status.check(cap.result, throw=throw, what="the load capacity", max_steps=max_steps, unreachable=_unreachable(height))
-    return cap
+    return Capacity(jnp.where(reachable, m, 0.0), reachable, it.astype(jnp.int32), jnp.round(result).astype(jnp.int32))
 
 
 def _unreachable(height) -> str:

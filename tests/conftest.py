@@ -1,4 +1,5 @@
 import gc
+import json
 import os
 import signal
 import subprocess
@@ -8,6 +9,7 @@ import threading
 from pathlib import Path
 
 import jax
+import jax.monitoring
 import numpy as np
 import pytest
 
@@ -25,6 +27,96 @@ os.environ["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"] = "-1"
 enable_compile_cache(SESSION_CACHE)
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
+
+
+class CompileCounter:
+    """The XLA programs this process builds, split into real compiles and loads from the session's
+    compilation cache (a program another worker compiled first), with the test that asked for each.
+    JAX times every build under "/jax/core/compile/backend_compile_duration" and, for a load, records
+    "/jax/compilation_cache/cache_hits" inside that timed span; programs found in a process's own
+    in-memory caches record neither. Subprocesses (CLI runs, the notebook's kernel) are not counted."""
+
+    BUILD = "/jax/core/compile/backend_compile_duration"
+    HIT = "/jax/compilation_cache/cache_hits"
+
+    def __init__(self):
+        self.test = "(outside tests)"
+        self.per_test: dict[str, list] = {}  # nodeid -> [compiles, compile seconds]
+        self.hits = 0
+        self._hit = False
+
+    def on_event(self, event, **_):
+        if event == self.HIT:
+            self._hit = True
+
+    def on_duration(self, event, seconds, **_):
+        if event != self.BUILD:
+            return
+        if self._hit:
+            self.hits, self._hit = self.hits + 1, False
+        else:
+            entry = self.per_test.setdefault(self.test, [0, 0.0])
+            entry[0], entry[1] = entry[0] + 1, entry[1] + seconds
+
+    def report(self) -> dict:
+        return {"hits": self.hits, "per_test": self.per_test}
+
+
+COMPILES = CompileCounter()
+jax.monitoring.register_event_listener(COMPILES.on_event)
+jax.monitoring.register_event_duration_secs_listener(COMPILES.on_duration)
+WORKER_REPORTS: list[dict] = []  # the controller's copy of each xdist worker's COMPILES.report()
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item):
+    COMPILES.test = item.nodeid  # fixtures set up for this test are charged to it
+    yield
+    COMPILES.test = "(outside tests)"
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node, error):
+    if "compiles" in getattr(node, "workeroutput", {}):
+        WORKER_REPORTS.append(json.loads(node.workeroutput["compiles"]))
+
+
+def compile_totals() -> tuple[int, int, float, list]:
+    """(compiles, cache loads, compile seconds, [(compiles, seconds, nodeid)], most seconds first) over
+    this process and every worker that reported."""
+    hits, per_test = 0, {}
+    for report in [COMPILES.report(), *WORKER_REPORTS]:
+        hits += report["hits"]
+        for test, (n, seconds) in report["per_test"].items():
+            entry = per_test.setdefault(test, [0, 0.0])
+            entry[0], entry[1] = entry[0] + n, entry[1] + seconds
+    ranked = sorted(((n, s, t) for t, (n, s) in per_test.items()), key=lambda r: r[1], reverse=True)
+    return sum(n for n, _, _ in ranked), hits, sum(s for _, s, _ in ranked), ranked
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_sessionfinish(session):
+    if hasattr(session.config, "workeroutput"):  # an xdist worker: hand the counts to the controller
+        session.config.workeroutput["compiles"] = json.dumps(COMPILES.report())
+        return
+    limit = os.environ.get("TDCT_MAX_COMPILES")
+    if limit and compile_totals()[0] > int(limit) and session.exitstatus == pytest.ExitCode.OK:
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+
+def pytest_terminal_summary(terminalreporter, config):
+    if hasattr(config, "workeroutput"):
+        return
+    compiles, hits, seconds, ranked = compile_totals()
+    write = terminalreporter.write_line
+    terminalreporter.section("compiled programs")
+    write(f"{compiles} XLA compiles ({seconds:.0f} s of compiling), {hits} loaded from the session's compilation cache")
+    for n, s, test in ranked[:10]:
+        write(f"{n:5d} {s:7.1f} s  {test}")
+    limit = os.environ.get("TDCT_MAX_COMPILES")
+    if limit and compiles > int(limit):
+        write(f"FAILED: {compiles} compiles, more than TDCT_MAX_COMPILES={limit}", red=True)
+
 
 NO_GRAVITY = None
 MAX_MAPS = 30_000

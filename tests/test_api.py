@@ -15,6 +15,7 @@ ACT = tdct.Actuation((8.0, 0.0, 0.0, 0.0), 0.05)
 LOAD = tdct.TipLoad.from_mass(0.02)
 
 
+@pytest.mark.slow
 def test_one_options_object_reaches_solve_compliance_and_sweep(robot):
     sol = tdct.solve(robot, ACT, LOAD, solver=OPTIONS)
     default = tdct.solve(robot, ACT, LOAD)
@@ -31,6 +32,7 @@ def test_one_options_object_reaches_solve_compliance_and_sweep(robot):
     np.testing.assert_allclose(res.tip_position[0], sol.tip_position, rtol=0, atol=1e-9)  # the engine's own root
 
 
+@pytest.mark.slow
 def test_one_options_object_reaches_capacity_and_calibrate(robot):
     cap = tdct.capacity(robot, ACT, solver=OPTIONS)
     height = tdct.solve(robot, ACT, tdct.TipLoad.from_mass(cap.mass), solver=OPTIONS).tip_position[1]

@@ -42,6 +42,7 @@ def assert_recovered(fit, truth):
         assert abs(fit.values[p] - true) < COVERAGE * fit.std_errors[p], (p, fit.values[p], true, fit.std_errors[p])
 
 
+@pytest.mark.slow
 def test_calibration_recovers_the_modulus_from_twice_the_truth(robot, fit_modulus):
     assert_recovered(fit_modulus, robot)
     # After the fit only the noise is left: RMSE of a 3D point with 0.1 mm per coordinate is sqrt(3) * 0.1 mm.
@@ -50,6 +51,7 @@ def test_calibration_recovers_the_modulus_from_twice_the_truth(robot, fit_modulu
     assert abs(fit_modulus.noise / NOISE - 1) < 0.2
 
 
+@pytest.mark.slow
 def test_joint_fit_recovers_modulus_and_tendon_offset(robot, start, measured):
     start = dataclasses.replace(start, tendon_offset=0.8 * float(robot.tendon_offset))
     fit = tdct.calibrate(start, measured, ("E_silicone", "tendon_offset"), progress=False)

@@ -40,6 +40,7 @@ def srun(stop: int, spec, out):
     return [start_cli(stop, "sweep", spec, "--out", out, "--quiet", env=env | dict(SLURM_PROCID=str(k))) for k in range(2)]
 
 
+@pytest.mark.slow
 def test_a_killed_two_process_sweep_resumes_per_part(tmp_path):
     spec, out = tmp_path / "grid.toml", tmp_path / "grid.npz"
     spec.write_text(SPEC)

@@ -175,6 +175,7 @@ def test_python_block_runs_as_written(path, code, expected, tmp_path, monkeypatc
         assert out.getvalue().strip() == expected.strip()
 
 
+@pytest.mark.slow
 def test_tour_notebook_runs(monkeypatch):
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
     nb = nbformat.read(ROOT / "notebooks" / "tour.ipynb", as_version=4)

@@ -61,6 +61,7 @@ def test_stragglers_are_solved_again_by_the_full_solver(robot, envelope, singles
     assert np.max(np.abs(res.tip_position[res.converged] - tips[res.converged])) < 1e-9
 
 
+@pytest.mark.slow
 def test_first_pass_shapes_and_compliance_match_the_full_solver(robot, envelope, monkeypatch):
     part = {k: v[:16] for k, v in envelope.items()}
     two = tdct.sweep(robot, batch=part, progress=False, throw=False, shapes=True, compliance=True, chunk_size=8)

@@ -261,6 +261,7 @@ def test_point_mass_gives_the_shape_of_the_equal_point_force():
     np.testing.assert_allclose(by_mass.total_force[0], m * np.asarray(G), rtol=0, atol=1e-16)
 
 
+@pytest.mark.slow
 def test_derivatives_in_anchor_and_tension_match_central_differences():
     def tip(anchor, tension):
         return tdct.solve(
@@ -497,6 +498,7 @@ def by_tension():
     return robot, load, tdct.solve(robot, tdct.GeneralActuation(TWO_TENSIONS), load, gravity=G)
 
 
+@pytest.mark.slow
 def test_displacements_fed_back_return_the_tensions_and_the_shape(by_tension):
     """Acceptance item 5: a tension-controlled solution's displacements, fed back as displacement
     control (from zero tensions), give back its tensions and shape."""
@@ -510,6 +512,7 @@ def test_displacements_fed_back_return_the_tensions_and_the_shape(by_tension):
     np.testing.assert_allclose(back.displacements, d, rtol=1e-9)
 
 
+@pytest.mark.slow
 def test_slack_exactly_where_the_tension_would_be_negative(by_tension):
     """Tendon 1 carries no tension in the reference: commanded a little less than its reading it
     goes slack (tension exactly 0, the shape unchanged), a little more and it pulls."""

@@ -48,6 +48,7 @@ def test_set_changes_a_general_field(capsys, two_segment):
     assert "tensions [N]:      1.5000, 0.0000, 0.4000" in text and "slack tendons:     none" in text
 
 
+@pytest.mark.slow
 def test_displacements_and_point_loads_equal_the_api(capsys, two_segment):
     argv = [*SOLVE, "--displacements-mm", "4:0.5,6:-20", "--point-load", "300:0,-0.05,0.02", "--json"]
     assert main(argv) == 0

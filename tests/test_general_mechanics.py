@@ -66,6 +66,7 @@ def tip_compliance(two_segment):
     return np.asarray(tdct.compliance(two_segment, tdct.GeneralActuation(TENSIONS), gravity=G, full=True))
 
 
+@pytest.mark.slow
 def test_tip_compliance_matches_central_differences(two_segment, tip_compliance):
     def at_tip(w):
         return tdct.Loads(tip_force=w[:3], tip_moment=w[3:], point_s=[0.3], point_force=[[0.0, 0.0, 0.0]])
@@ -74,6 +75,7 @@ def test_tip_compliance_matches_central_differences(two_segment, tip_compliance)
     assert rel(tip_compliance, fd) < FD_RTOL, [rel(tip_compliance[:, k], fd[:, k]) for k in range(6)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("s", [0.2, 0.3])  # the segment boundary (and segment 1's anchors), inside segment 2
 def test_compliance_at_an_arc_length_matches_central_differences(two_segment, tip_compliance, s):
     act = tdct.GeneralActuation(TENSIONS)
@@ -119,6 +121,7 @@ def fitted(two_segment):
     return measured, tdct.calibrate(start, measured, PARAMS, gravity=G, progress=False)
 
 
+@pytest.mark.slow
 def test_calibration_recovers_the_modulus_and_a_tendon_offset(two_segment, fitted):
     measured, fit = fitted
     assert [e.name for e in measured] == ["t1.5-0-0.4-0-0.8-0.3N_m0g", "t0-1-0-0.5-0-0N_m0g", "t0-0-1.2-0-0-0.9N_m0g"]
@@ -144,6 +147,7 @@ def paper_act(tension=1.0, displacement=DISPLACEMENT, insertion=0.08):
     return tdct.GeneralActuation([0.0, 0.0, 0.0, tension], [insertion], [displacement], driven=(0,))
 
 
+@pytest.mark.slow
 def test_actuation_jacobian_covers_tensions_displacements_and_insertions():
     robot, load = tdct.Robot().to_general(), tdct.TipLoad.from_mass(0.02)
     J = np.asarray(tdct.kinematic_jacobian(robot, paper_act(), load, gravity=G))

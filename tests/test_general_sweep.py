@@ -82,6 +82,7 @@ def test_tension_and_field_sweep_equals_single_solves(two_segment, tension_grid,
     assert np.all(np.abs(res.tip_position[1:, 1, :2]) < np.abs(res.tip_position[1:, 0, :2]) + 1e-12)
 
 
+@pytest.mark.slow
 def test_warm_started_displacement_sweep_equals_single_solves_and_returns_the_tensions(two_segment, displacement_sweep):
     res = displacement_sweep
     assert res.shape == (2, len(DISPLACEMENTS)) and res.n_failed == 0 and res.tensions.shape == (2, len(DISPLACEMENTS), 6)
@@ -132,6 +133,7 @@ def test_bad_names_and_values_error_before_any_compile(two_segment, monkeypatch,
     assert message in str(e.value)
 
 
+@pytest.mark.slow
 def test_spec_file_sweep_of_a_general_robot(two_segment, displacement_sweep, tmp_path):
     (tmp_path / "two_segment.toml").write_text((ROBOTS / "two_segment.toml").read_text())
     (tmp_path / "spec.toml").write_text(SPEC)

@@ -37,11 +37,10 @@ def test_capacity_is_differentiable_in_robot_parameters(robot):
     def mass(offset):
         return tdct.capacity(dataclasses.replace(robot, tendon_offset=offset), act).mass
 
-    f = jax.jit(mass)
     r = float(robot.tendon_offset)
-    exact = jax.jit(jax.grad(mass))(r)
+    exact = jax.grad(mass)(r)  # called as the manipulation guide calls it: the same compiled programs
     h = 1e-6
-    central = (f(r + h) - f(r - h)) / (2 * h)
+    central = (mass(r + h) - mass(r - h)) / (2 * h)
     assert exact > 0
     assert abs(exact - central) < 1e-6 * abs(central)
 
@@ -60,6 +59,7 @@ def test_a_tip_that_cannot_reach_the_height_is_unreachable(robot, capacities):
         tdct.load_capacity(robot, batch=batch, progress=False)
 
 
+@pytest.mark.slow
 def test_optimal_insertion_is_a_stationary_maximum(robot):
     act, load = tdct.Actuation((10.0, 0, 0, 0)), tdct.TipLoad.from_mass(0.05)
     res = tdct.optimal_insertion(robot, act, load, n_curve=9, progress=False)

@@ -41,6 +41,7 @@ def test_autodiff_compliance_matches_central_differences_when_bent(robot):
     assert rel_err((W - W.T)[[2, 0, 1], [1, 2, 0]] / 2, np.asarray(full[3:, :3]) @ dF) < 1e-4
 
 
+@pytest.mark.slow
 def test_compliance_is_differentiable_in_the_insertion(robot):
     """The compliance comes from Newton's Jacobians at the root; its own derivative must still be
     the derivative (not the zero tangent of a by-product): against central differences."""

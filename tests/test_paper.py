@@ -29,6 +29,7 @@ def test_headline_reports_the_reduction_beside_the_paper():
     assert abs(row["paper_reduction_percent"] - 57.7) < 0.01
 
 
+@pytest.mark.slow
 def test_highest_reach_is_the_maximum_of_the_tip_height(robot):
     """Sec. V.A: the highest reach with 50 g is where y_tip stops rising, not a point a chosen
     offset below it. At the reported insertion, central differences of forward solves give a zero

@@ -140,6 +140,7 @@ def test_paper_options_show_the_known_equilibrium_defect(robot):
     assert f_err > 1e-4
 
 
+@pytest.mark.slow
 def test_rk4_is_fourth_order(robot):
     act, load = tdct.Actuation(tensions=(10.0, 0, 0, 0), insertion=0.04), tdct.TipLoad.from_mass(0.05)
     tips = {n: np.asarray(tdct.solve(robot, act, load, solver=tdct.SolverOptions(steps=n)).tip_position) for n in (10, 20, 80)}

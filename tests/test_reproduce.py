@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from tdct_jax.cli import main
 
 FIGURES = {
@@ -16,6 +18,7 @@ FIGURES = {
 }
 
 
+@pytest.mark.slow
 def test_quick_reproduce_writes_every_figure_and_the_summary(tmp_path, capsys):
     assert main(["reproduce", "--quick", "--quiet", "--out", str(tmp_path)]) == 0
     assert FIGURES <= {p.name for p in tmp_path.glob("*.png")}

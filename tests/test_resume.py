@@ -236,6 +236,7 @@ def test_a_bad_spec_exits_2_naming_key_value_and_range(spec, tmp_path, capsys, e
     assert not (tmp_path / "x.partial").exists()
 
 
+@pytest.mark.slow
 def test_failures_in_finished_chunks_raise_after_the_resume(tmp_path):
     """throw=True counts the failed points of the chunks an earlier run finished too."""
     options = dict(solver=tdct.SolverOptions(steps=4, max_iter=1))

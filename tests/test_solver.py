@@ -9,6 +9,7 @@ import re
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from conftest import rel_err
 
 import tdct_jax as tdct
@@ -33,6 +34,7 @@ def batched_solve(robot):
     return jax.jit(jax.vmap(one))
 
 
+@pytest.mark.slow
 def test_converges_over_the_operating_envelope(robot):
     tensions, insertion, force = envelope(200)
     sol = batched_solve(robot)(tensions, insertion, force)
@@ -106,6 +108,7 @@ def test_newton_pass_loops_run_in_sequence(paper_case):
     assert _large_arrays_in_loops(hlo, SEQUENTIAL_BYTES) == []
 
 
+@pytest.mark.slow
 def test_reverse_and_forward_gradients_agree_with_central_differences(paper_case):
     robot, act, load, _ = paper_case
 

@@ -37,6 +37,7 @@ def test_grid_sweep_equals_one_by_one_solves(robot, grid_sweep):
     np.testing.assert_array_equal(res.inputs["insertion"][:, 1], GRID["insertion"])
 
 
+@pytest.mark.slow
 def test_batch_of_robot_fields_zips_points(robot):
     batch = {"E_silicone": np.array([0.7e6, 1.1e6]), "insertion": np.array([0.02, 0.12])}
     res = tdct.sweep(robot, BASE, batch=batch, shapes=True, compliance=True, progress=False)
@@ -48,6 +49,7 @@ def test_batch_of_robot_fields_zips_points(robot):
         np.testing.assert_allclose(res.compliance[k], tdct.compliance(r, act), rtol=1e-9)
 
 
+@pytest.mark.slow
 def test_warm_started_path_matches_cold_solves(robot):
     grid = {"insertion": np.array([0.0, 0.1]), "tensions": np.outer(np.linspace(0.0, 10.0, 6), [1.0, 0.0, 0.0, 0.0])}
     cold = tdct.sweep(robot, grid=grid, progress=False)
@@ -103,6 +105,7 @@ def test_bad_sweep_input_names_the_field(robot, kwargs, message):
     assert message in str(e.value)
 
 
+@pytest.mark.slow
 def test_sharded_sweep_on_two_devices_equals_one_device():
     script = textwrap.dedent(
         """
