@@ -3,7 +3,8 @@
 Four figures, each a median of warm calls (compile reported apart): a cold forward solve (from
 the straight rod) and a cold IK (from the default start, all four tendons and the insertion free,
 a reachable target); a warm forward update along a trajectory (``guess`` = the last base wrench)
-and a tracking IK update (``tdct.track``, one compiled scan, per target); the IK's two phase-1
+and a tracking IK update (``tdct.track``, one compiled scan, per target, and its IK steps per warm
+update); the IK's two phase-1
 methods ("augmented": shooting unknowns and inputs together; "nested": a converged forward solve
 at every step); and batched IK throughput (targets per second) against batched forward solves.
 Goals from the issue: a tracking update within 2x a warm forward update, a cold IK within 5x a
@@ -84,6 +85,9 @@ def main() -> None:
         max(3, repeats // 4),
     )
     rows["tracking IK path, tdct.track (per update)"] /= n_path
+    steps = np.asarray(tdct.track(robot, targets, load=load, guess=act0).iterations)[1:]  # the first update is cold
+    tracking_steps = dict(median=float(np.median(steps)), mean=float(steps.mean()), max=int(steps.max()))
+    print(f"tracking IK steps per warm update: {tracking_steps}")
 
     rng = np.random.default_rng(0)
     batch = {
@@ -121,6 +125,7 @@ def main() -> None:
         batch=n_batch,
         median_ms=rows,
         first_call_s=compile_s,
+        tracking_steps_per_update=tracking_steps,
         ratios=ratios,
         goals=dict(tracking_over_warm_forward=2.0, cold_ik_over_cold_forward=5.0),
     )

@@ -18,9 +18,12 @@ d / L) and kept inside their bounds exactly. Two phases:
    Hessian of the Lagrangian, and the same exact active-set subproblem.
 
 A target that the bounds do not let the tip reach ends phase 1 at a stationary point of |e|^2:
-status UNREACHABLE with the nearest pose found and its distance. Derivatives of the solution
-with respect to the target and the robot come from implicit differentiation of the optimality
-conditions at the solution (``jax.jacfwd`` through ``inverse_kinematics``).
+status UNREACHABLE with the nearest pose found and its distance. When phase 1 from the given start
+falls short, the next start is the corner of the input box whose tip, by coarse forward solves
+side by side, is nearest the target (``nearest_on_grid``): the basin of the nearest pose.
+Derivatives of the solution with respect to the target and the robot come from implicit
+differentiation of the optimality conditions at the solution (``jax.jacfwd`` through
+``inverse_kinematics``).
 
 The package, one job a module: ``problem`` (target, bounds, what is free, v <-> actuation),
 ``objectives``, ``evaluation`` (a forward solve with its derivatives in v), ``reach`` (phase 1),
@@ -119,7 +122,7 @@ def inverse_kinematics(
     if jnp.ndim(prob.target.position) == 2:
         result = _batched(prob, plan, v0, wrench0)
     else:
-        result, _ = _solve_ik(prob, v0, wrench0, plan)
+        result = _solve_ik(prob, v0, wrench0, plan)[0]
     _check(result, throw, ik.max_steps)
     return result
 
@@ -127,6 +130,9 @@ def inverse_kinematics(
 def track(robot: Robot, targets: Target, **options) -> IKResult:
     """Inverse kinematics along a sequence of targets (a Target whose fields have a leading axis),
     each started from the last solution, as one compiled ``lax.scan``: the real-time control case.
+    A warm update takes its first step from the last update's linearisation (``Model``: the
+    first-order predictor of the answer, no evaluation before it), then Gauss-Newton steps to
+    the same tolerance as a cold solve (tests/test_ik_tracking.py).
 
     Args:
         robot, targets: the robot and the targets in order (at least one; a Target, or tip

@@ -15,6 +15,7 @@ from ..batch import Kernel, default_chunk_size, lanes_per_call, run_batched
 from ..checks import is_concrete
 from .driver import _solve_ik
 from .problem import IKResult, Plan, Problem, _tip_force, scaled_inputs
+from .reach import _where, no_model
 from .starts import STARTS
 
 CHUNK_SIZE = 64
@@ -71,11 +72,10 @@ def _ik_point(base, point, kernel: Kernel) -> dict:
 @functools.partial(jax.jit, static_argnames=("plan", "tree", "own"))
 def _track(prob, leaves, v0, wrench0, plan, tree, own):
     def step(carry, xs):
-        v, wrench = carry
+        v, wrench, model = carry
         target = jax.tree.unflatten(tree, [xs[own.index(i)] if i in own else leaf for i, leaf in enumerate(leaves)])
-        result, wrench_new = _solve_ik(prob._replace(target=target), v, wrench, plan)
+        result, *new = _solve_ik(prob._replace(target=target), v, wrench, plan, model=model)
         ok = result.result == status.SUCCESS
-        v_new = scaled_inputs(result.actuation, prob, plan)
-        return (jnp.where(ok, v_new, v), jnp.where(ok, wrench_new, wrench)), result
+        return _where(ok, (scaled_inputs(result.actuation, prob, plan), *new), (v, wrench, model)), result
 
-    return lax.scan(step, (v0, wrench0), [leaves[i] for i in own])[1]
+    return lax.scan(step, (v0, wrench0, no_model(prob, plan)), [leaves[i] for i in own])[1]

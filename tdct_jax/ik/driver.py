@@ -19,8 +19,8 @@ from .evaluation import evaluate
 from .objectives import objective_value
 from .optimise import optimise
 from .problem import IKResult, Plan, Problem, _wrench, actuation_of, pose_errors
-from .reach import Reach, reach_augmented, reach_nested
-from .starts import STARTS, starts
+from .reach import Model, Reach, _usable, _where, no_model, reach_augmented, reach_nested
+from .starts import STARTS, nearest_on_grid, starts
 
 
 class Found(NamedTuple):
@@ -28,6 +28,7 @@ class Found(NamedTuple):
     wrench: jax.Array
     steps: jax.Array
     code: jax.Array
+    model: Model  # phase 1's last linearisation (``Model``; tip NaN)
 
 
 class Tried(NamedTuple):
@@ -39,38 +40,61 @@ class Tried(NamedTuple):
     steps: jax.Array
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(4,))
-def find(prob: Problem, v0, wrench0, n_starts, plan: Plan) -> Found:
+def _lazily(needed, f, otherwise):
+    """f() where ``needed``, else ``otherwise``: a while loop of at most one pass rather than
+    ``lax.cond``, so that under ``vmap`` f runs only when some lane needs it."""
+    return lax.while_loop(lambda c: c[0], lambda c: (jnp.zeros_like(c[0]), f()), (needed, otherwise))[1]
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(5,))
+def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Found:
     """The IK solution in scaled inputs (see the module docstring), from v0 (and the converged or
-    NaN base wrench there), then from ``starts`` until one reaches (the nearest pose of them all
-    otherwise); its derivatives by implicit differentiation (``_find_jvp``)."""
+    NaN base wrench there; with a usable ``model`` at v0, a warm update from it), then from the
+    grid start (``nearest_on_grid``) and ``starts`` until one reaches (the nearest pose of them
+    all otherwise); its derivatives by implicit differentiation (``_find_jvp``)."""
     candidates = starts(v0, prob, plan)
-    reach = reach_augmented if plan.method == "augmented" else reach_nested
+    cold = no_model(prob, plan)
+    warm = _usable(model)
+
+    def reach(v, wrench, first):
+        if plan.method == "nested":
+            return reach_nested(v, wrench, prob, plan)._replace(model=cold)
+        return reach_augmented(v, wrench, prob, plan, _where(first, model, cold))
 
     def cond(c):
         return (c.k < n_starts) & (c.best.code != status.SUCCESS)
 
     def body(c):
         k, best, steps = c
-        v, guess = candidates[k], jnp.where(k == 0, wrench0, jnp.nan)
+        grid = _lazily(cond(c) & (k == 1), lambda: nearest_on_grid(prob, plan), v0)
+        v = jnp.where(k == 1, grid, candidates[jnp.maximum(k - 1, 0)])
+        guess = jnp.where(k == 0, wrench0, jnp.nan)
         problem = (prob.robot, actuation_of(v, prob, plan), prob.load, prob.gravity)
-        x, info = root(*problem, guess, prob.solver)
-        r = reach(v, unscaled(prob.robot, x, force_scale(*problem)), prob, plan)
-        r = r._replace(code=jnp.where(info.result == status.SUCCESS, r.code, info.result))
+
+        def solved():
+            x, info = root(*problem, guess, prob.solver)
+            return unscaled(prob.robot, x, force_scale(*problem)), info.result.astype(jnp.int32)
+
+        # a warm update's wrench0 is the converged solve at v0
+        wrench, code = lax.cond(warm & (k == 0), lambda: (wrench0, jnp.int32(status.SUCCESS)), solved)
+        r = reach(v, wrench, k == 0)
+        r = r._replace(code=jnp.where(code == status.SUCCESS, r.code, code))
         rank, best_rank = (
             jnp.where(x.code == status.SUCCESS, 0, jnp.where(x.code == status.UNREACHABLE, 1, 2)) for x in (r, best)
         )
         closer = (rank < best_rank) | ((rank == best_rank) & (r.e @ r.e < best.e @ best.e))
         return Tried(k + 1, jax.tree.map(lambda a, b: jnp.where(closer, a, b), r, best), steps + r.steps)
 
-    none = Reach(v0, jnp.full(jnp.shape(wrench0), jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT))
+    none = Reach(
+        v0, jnp.full(jnp.shape(wrench0), jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT), cold
+    )
     tried = lax.while_loop(cond, body, Tried(0, none, 0))
     r = tried.best._replace(steps=tried.steps)
     if plan.objective is not None:
         o = optimise(r.v, r.wrench, prob, plan)
         use = r.code == status.SUCCESS
-        r = jax.tree.map(lambda a, b: jnp.where(use, a, b), Reach(o.v, o.wrench, o.e, r.steps + o.steps, o.code), r)
-    return Found(r.v, r.wrench, r.steps, r.code)
+        r = jax.tree.map(lambda a, b: jnp.where(use, a, b), Reach(o.v, o.wrench, o.e, r.steps + o.steps, o.code, r.model), r)
+    return Found(r.v, r.wrench, r.steps, r.code, r.model)
 
 
 @find.defjvp
@@ -78,9 +102,9 @@ def _find_jvp(plan, primals, tangents):
     """Implicit differentiation of the optimality conditions at the solution: inputs at a bound
     follow the bound; the others keep e = 0 (the minimum-norm change when the task does not fix
     them) or, with an objective, the KKT conditions grad phi + G^T lam = 0, e = 0."""
-    prob, v0, wrench0, n_starts = primals
+    prob, v0, wrench0, n_starts, model = primals
     dprob = tangents[0]
-    found = find(prob, v0, wrench0, n_starts, plan)
+    found = find(prob, v0, wrench0, n_starts, model, plan)
     v, wrench = found.v, found.wrench
 
     def at(prob, v):
@@ -112,7 +136,7 @@ def _find_jvp(plan, primals, tangents):
         rhs = jnp.concatenate([-(dL + W @ dv_bound) * F, -rhs_e])
         dv = jnp.linalg.solve(K, rhs)[:n]
     dv = jnp.where(free, dv, dv_bound)
-    zero = jax.tree.map(_zero_like, (wrench, found.steps, found.code))
+    zero = jax.tree.map(_zero_like, (wrench, found.steps, found.code, found.model))
     return found, Found(dv, *zero)
 
 
@@ -122,9 +146,11 @@ def _zero_like(x):
 
 
 @functools.partial(jax.jit, static_argnames=("plan",))
-def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, n_starts=STARTS):
-    """``find``, then the forward solve there and the result's numbers; (IKResult, wrench)."""
-    found = find(prob, v0, wrench0, n_starts, plan)
+def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, n_starts=STARTS, model=None):
+    """``find`` (warm from ``model``, a Model at v0, when given), then the forward solve there and
+    the result's numbers; (IKResult, wrench, the Model for the next warm update)."""
+    model = no_model(prob, plan) if model is None else model
+    found = find(prob, v0, wrench0, n_starts, model, plan)
     act = actuation_of(found.v, prob, plan)
     sol, C = solution_and_compliance(prob.robot, act, prob.load, prob.gravity, found.wrench, prob.solver)
     if isinstance(act, GeneralActuation):  # the driven tendons' tensions as found
@@ -132,4 +158,5 @@ def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, n_starts=STARTS):
     position, orientation = pose_errors(sol.tip_position, sol.tip_rotation, prob.target)
     phi = jnp.nan if plan.objective is None else objective_value(sol, C, act, prob, plan)
     code = jnp.where(sol.result == status.SUCCESS, found.code, sol.result).astype(jnp.int32)
-    return IKResult(act, sol, position, orientation, jnp.asarray(phi, float), found.steps, code), _wrench(sol, act)
+    result = IKResult(act, sol, position, orientation, jnp.asarray(phi, float), found.steps, code)
+    return result, _wrench(sol, act), found.model._replace(tip_position=sol.tip_position, tip_rotation=sol.tip_rotation)

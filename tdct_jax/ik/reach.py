@@ -17,6 +17,10 @@ from .problem import Plan, Problem, actuation_of, task_residual
 
 MU_START = 1e-3
 """Initial Levenberg-Marquardt damping (relative to the diagonal of G^T G)."""
+MU_WARM = 1e-10
+"""Initial damping of a warm update (``reach_augmented`` with the last update's model): its model
+is good, so Gauss-Newton's minimum-norm step; at MU_START the directions G barely moves (the
+insertion) would converge linearly, a few steps per update."""
 MU_GIVE_UP = 1e10
 """Damping at which a phase stops: no step it could take lowers its merit."""
 
@@ -58,12 +62,35 @@ def _reach_status(e, G, v, mu, it, prob: Problem, tol, max_steps, stalled=False)
     return code.astype(jnp.int32), reached | stationary | (it >= max_steps)
 
 
+class Model(NamedTuple):
+    """Phase 1's last linearisation, at its answer: the first step's model of the next warm
+    update (``track``), which then needs no evaluation before its first step. NaN: none."""
+
+    K: jax.Array  # d(shooting unknowns, unscaled) / dv, (n, k)
+    G: jax.Array  # de / dv with the unknowns eliminated, (m, k)
+    tip_position: jax.Array  # [m], of the forward solve at the answer
+    tip_rotation: jax.Array
+
+
+def no_model(prob: Problem, plan: Plan) -> Model:
+    """A Model of NaNs, shaped for the problem: a cold start."""
+    n, k = 6 + len(getattr(prob.base, "driven", ())), len(plan.tendons) + len(plan.tubes)
+    return Model(
+        jnp.full((n, k), jnp.nan), jnp.full((prob.target.size, k), jnp.nan), jnp.full(3, jnp.nan), jnp.full((3, 3), jnp.nan)
+    )
+
+
+def _usable(model: Model):
+    return jnp.all(jnp.array([jnp.all(jnp.isfinite(a)) for a in model]))
+
+
 class Reach(NamedTuple):
     v: jax.Array
     wrench: jax.Array
     e: jax.Array
     steps: jax.Array
     code: jax.Array  # SUCCESS (reached), UNREACHABLE (stationary above tol), or a failure code
+    model: Model | None = None  # reach_augmented's last linearisation (tip NaN)
 
 
 def _unset(f, *args):
@@ -141,15 +168,18 @@ class AugmentedState(NamedTuple):
     nu: jax.Array
     it: jax.Array
     code: jax.Array
+    first: jax.Array  # this pass's trial is z itself, taken as is (the start, or after a warm miss)
     done: jax.Array
 
 
-def reach_augmented(v0, wrench0, prob: Problem, plan: Plan) -> Reach:
+def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, model: Model | None = None) -> Reach:
     """Phase 1 on the shooting unknowns x and the inputs v together: each step is Newton on the
     tip boundary residual r(x, v) = 0 with Gauss-Newton on e for v, from one forward-mode
     Jacobian pass of (r, e) in (x, v); x is eliminated, so the bounded step is taken in v alone.
     ``wrench0`` must be the converged base wrench at v0. The loop's first pass linearises at the
-    start, so the Jacobian pass is compiled once."""
+    start, so the Jacobian pass is compiled once; with a usable ``model`` (the last update's, at
+    v0) it takes a step from that model instead, the first-order predictor of the answer, with
+    the damping MU_WARM."""
     robot, L = prob.robot, prob.robot.length
     tol, max_steps = prob.options.tol, prob.options.max_steps
     F_s = force_scale(robot, actuation_of(v0, prob, plan), prob.load, prob.gravity)
@@ -177,8 +207,7 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan) -> Reach:
         return ~c.done
 
     def body(c):
-        z, F, lin, s, mu, nu, it = c.z, c.F, c.lin, c.s, c.mu, c.nu, c.it
-        first = it == 0
+        z, F, lin, s, mu, nu, it, first = c.z, c.F, c.lin, c.s, c.mu, c.nu, c.it, c.first
         dx0, K, G, e = lin
         trial = z + jnp.concatenate([dx0 + K @ s, s])
         F_t, lin_t = linearise(trial)
@@ -198,13 +227,25 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan) -> Reach:
         code = jnp.where((code == status.SUCCESS) & (r > prob.solver.tol), jnp.int32(status.OUTER_LIMIT), code)
         code = jnp.where((code == status.UNREACHABLE) & (r > jnp.sqrt(prob.solver.tol)), jnp.int32(status.OUTER_LIMIT), code)
         done = done & ((code != status.OUTER_LIMIT) | (it >= max_steps) | (mu >= MU_GIVE_UP))
-        s = _lm_step(lin.G, lin.e, mu, prob.lo - z[n:], prob.hi - z[n:])
-        return AugmentedState(z, F, lin, s, mu, nu, it + 1, code, done)
+        # a warm update whose first step the old model got wrong linearises at the start next
+        fresh = warm & (it == 0) & ~better
+        s = jnp.where(fresh, 0.0, _lm_step(lin.G, lin.e, mu, prob.lo - z[n:], prob.hi - z[n:]))
+        return AugmentedState(z, F, lin, s, mu, nu, it + 1, code, fresh, done & ~fresh)
 
     z0 = jnp.concatenate([scaled(robot, wrench0, F_s), v0])
     F0, lin0 = _unset(linearise, z0)
-    init = AugmentedState(
-        z0, F0, lin0, jnp.zeros_like(v0), jnp.asarray(MU_START), jnp.asarray(2.0), 0, jnp.int32(status.OUTER_LIMIT), False
-    )
+    s0, mu0, warm = jnp.zeros_like(v0), jnp.asarray(MU_START), jnp.asarray(False)
+    if model is not None:
+        # the boundary residual is converged at v0; e there from the tip, for the new target
+        warm = _usable(model)
+        e0 = task_residual(model.tip_position, model.tip_rotation, prob.target, L)
+        K0 = jax.vmap(lambda k: scaled(robot, k, F_s), 1, 1)(model.K)
+        F0, lin0 = _where(warm, (jnp.concatenate([jnp.zeros(n), e0]), Linearisation(jnp.zeros(n), K0, model.G, e0)), (F0, lin0))
+        mu0 = jnp.where(warm, MU_WARM, MU_START)
+        s0 = jnp.where(warm, _lm_step(model.G, e0, MU_WARM, prob.lo - v0, prob.hi - v0), s0)
+    init = AugmentedState(z0, F0, lin0, s0, mu0, jnp.asarray(2.0), 0, jnp.int32(status.OUTER_LIMIT), ~warm, False)
     c = lax.while_loop(cond, body, init)
-    return Reach(c.z[n:], unscaled(robot, c.z[:n], F_s), c.F[n:], c.it - 1, c.code)
+    last = Model(
+        jax.vmap(lambda k: unscaled(robot, k, F_s), 1, 1)(c.lin.K), c.lin.G, jnp.full(3, jnp.nan), jnp.full((3, 3), jnp.nan)
+    )
+    return Reach(c.z[n:], unscaled(robot, c.z[:n], F_s), c.F[n:], c.it - 1 + warm, c.code, last)
