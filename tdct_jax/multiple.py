@@ -1,24 +1,37 @@
-"""Multiple shooting: the paper robot's RK4 steps in K intervals integrated side by side (issue 24).
+"""Multiple shooting: a robot's RK4 steps in K intervals integrated side by side (issue 24).
 
-The 2 * steps steps of the one scan over both segments (``shooting.shoot``) split into K intervals
-of equal step count, each integrated with ``vmap`` from its own start State. The unknowns are
-the scaled base wrench x (6,), as in single shooting, and each interior interval's start: its
-rotation R_j and scaled total force n_j = N_j / F_c and moment m_j = M_j / (F_c L), K - 1 of
-each. Positions are not unknowns: the vector field does not depend on p (segments.py), so each
-interval runs from p = 0 and the positions are the running sum of the intervals' displacements.
-The residuals: continuity of (R, N, M) at each interior start, vee of the skew part of
-R_end R_j^T for the rotation (9 (K - 1)), then the tip condition (6), scaled as in shooting.py.
+The chain of RK4 steps of single shooting splits into K intervals of equal step count, each
+integrated with ``vmap`` from its own start State. The paper robot's chain is the 2 * steps
+steps of the one scan over both segments (``shooting.shoot``), K dividing 2 * steps. A
+GeneralRobot's is its P breakpoint intervals (``general.plan``) of ``steps`` steps each, K
+dividing P * steps (``general.shooting_intervals``): cut into pieces of g = gcd(P steps / K,
+steps) steps (``general.pieces``), each inside one breakpoint interval, P steps / (K g) of them an
+interval; K = P q (q dividing steps) makes every breakpoint a boundary, each breakpoint interval
+cut into q, and K dividing P gives each interval P / K whole breakpoint intervals. A breakpoint's
+jump (dN, dM: point loads and masses) is applied at the start of the piece after it, so at an
+interval's start where the breakpoint is a boundary: the start unknowns are the state before it.
 
-Each interval's end depends on its own start only, so the Jacobian is block bidiagonal. Its
-blocks A_j = d(end of interval j) / d(start), with the start's rotation perturbed as
-(I + w^) R_j, come from one ``jacfwd`` pass over all intervals at once. A Newton step eliminates
-the interior updates along the intervals (condensation): d xi_j = a_j + B_j dx, with
-d xi_0 = (0, dx), a_j = c_j + A_j-1 a_j-1 and B_j = A_j-1 B_j-1 (c_j: the continuity residual),
-leaving a 6x6 system T B_K-1 dx = -(r + T a_K-1) for the base (T: the tip rows), damped as
-``newton.newton`` damps it; rotations then move by the Cayley map. At the root T B_K-1 is the
-chain rule of single shooting's Jacobian, so the implicit derivatives and the compliance (eq. 41)
-are single shooting's. The chain of dependent operations is K times shorter; the arithmetic is
-that of single shooting with 9 tangents instead of 6.
+The unknowns are single shooting's scaled x (6 + n_d,): the base wrench, then a GeneralRobot's
+displacement-driven tensions, which enter every interval; and each interior interval's start:
+its rotation R_j and scaled total force n_j = N_j / F_c and moment m_j = M_j / (F_c L), K - 1 of
+each. Positions and tendon lengths are not unknowns: the vector field depends on neither, so
+each interval runs from p = 0, l = 0 and they are the running sums of the intervals'. The
+residuals: continuity of (R, N, M) at each interior start, vee of the skew part of R_end R_j^T
+for the rotation (9 (K - 1)), then single shooting's (tip, then the driven tendons'), scaled as
+in shooting.py.
+
+Each interval's end depends on its own start z_j = (R_j, n_j, m_j) and on the driven tensions t
+only, so the Jacobian is block bidiagonal plus the columns of t. Its blocks, with the start's
+rotation perturbed as (I + w^) R_j, come from one ``jacfwd`` pass over all intervals at once
+(9 + n_d tangents, each perturbing every interval's start alike). A Newton step eliminates the
+interior updates along the intervals (condensation): with z_j extended by t, d z_j = a_j + B_j dx,
+d z_0 = (0, dx), a_j = c_j + A_j-1 a_j-1 and B_j = A_j-1 B_j-1 (c_j: the continuity residual),
+leaving a (6 + n_d) system for x (the closing rows through the last end, and the tendon lengths
+through every interval), damped as ``newton.newton`` damps it; rotations then move by the Cayley
+map. At the root that system's matrix is the chain rule of single shooting's Jacobian, so the
+implicit derivatives and the compliance (eq. 41) are single shooting's. The chain of dependent
+operations is K times shorter; the arithmetic is that of single shooting with 9 + n_d tangents
+instead of 6 + n_d.
 """
 
 from __future__ import annotations
@@ -35,7 +48,8 @@ from .segments import State
 from .so3 import hat, orthonormalize
 
 N_START = 9
-"""Perturbations of an interval's start: rotation (3), scaled N (3), scaled M (3)."""
+"""Perturbations of an interval's start: rotation (3), scaled N (3), scaled M (3) (then the n_d
+driven tensions)."""
 
 ORTHONORMALIZE = 4
 """Newton-Schulz steps that bring the coarse pass's rotations onto SO(3): each squares the error."""
