@@ -40,6 +40,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import general, shooting
 from .description import GeneralRobot
@@ -116,15 +117,21 @@ def _cayley(w):
 
 
 def _intervals(robot, act, solver):
-    """Per-step segments and step lengths of the paper robot's one scan over both segments, (K, 2 steps / K, ...)."""
+    """The paper robot's one scan over both segments as K intervals of c = 2 steps / K steps:
+    pieces of g = gcd(c, steps) steps (``shooting.per_piece``), their segments and step lengths
+    (K, c / g, ...), and g."""
     back, sil = shooting.segments(robot, act, solver)
     n, K = solver.steps, solver.intervals
-    (seg_b, h_b), (seg_s, h_s) = (
-        shooting.per_step(back, act.insertion, n),
-        shooting.per_step(sil, robot.length - act.insertion, n),
+    c = 2 * n // K
+    g = int(np.gcd(c, n))
+
+    def split(seg, length):  # a segment's n steps as n / g pieces
+        return jax.tree.map(lambda a: jnp.repeat(a, n // g, axis=0), shooting.per_piece(seg, length, n))
+
+    both = jax.tree.map(
+        lambda a, b: jnp.concatenate([a, b]), split(back, act.insertion), split(sil, robot.length - act.insertion)
     )
-    both = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), (seg_b, h_b), (seg_s, h_s))
-    return jax.tree.map(lambda a: a.reshape(K, 2 * n // K, *a.shape[1:]), both)
+    return jax.tree.map(lambda a: a.reshape(K, c // g, *a.shape[1:]), both), g
 
 
 def _starts(u: Unknowns, F_c, L):
@@ -156,8 +163,8 @@ def run(robot, act, load, gravity, solver, x, starts, F_c, path: bool = False) -
     K = solver.intervals
     y0 = State(jnp.zeros((K, 3)), R, N, M)
     if not isinstance(robot, GeneralRobot):
-        segs, h = _intervals(robot, act, solver)
-        out = jax.vmap(lambda seg, h, y: shooting.integrate(seg, y, h, gravity, path))(segs, h, y0)
+        (segs, h), g = _intervals(robot, act, solver)
+        out = jax.vmap(lambda seg, h, y: shooting.integrate(seg, y, h, gravity, path, g))(segs, h, y0)
         y, nodes = out if path else (out, None)
         return Run(y, jnp.zeros((K, 0)), act, None, nodes)
     act = general.with_driven(act, x, F_c)
@@ -285,8 +292,9 @@ def coarse(robot, act, load, gravity, solver, x, F_c) -> Unknowns:
         _, nodes = general.integrate(robot, load, gravity, flat, general.Carry(y0), 1, path=True)
         ys = jax.tree.map(lambda a: a[ps.h.shape[1] - 1 :: ps.h.shape[1], 1][:-1], nodes.y)
     else:
-        segs, h = _intervals(robot, act, solver)
-        _, ys = shooting.integrate(jax.tree.map(lambda a: a[:, 0], segs), y0, h.sum(1), gravity, path=True)
+        (segs, h), g = _intervals(robot, act, solver)
+        lengths = jnp.repeat(h, g, axis=1).sum(1)
+        _, ys = shooting.integrate(jax.tree.map(lambda a: a[:, 0], segs), y0, lengths, gravity, path=True)
         ys = jax.tree.map(lambda a: a[1:-1], ys)
     R = ys.R
     for _ in range(ORTHONORMALIZE):  # a long step leaves R off SO(3); Newton's steps keep it on
