@@ -8,6 +8,10 @@ by side in one process, the variants alternated call by call: warm solves of CON
 small vmapped batch, compile times, and the agreement with single shooting of tips, implicit
 derivatives d tip / d(tensions, insertion, E_silicone) and compliance; writes
 benchmarks/results/multiple_shooting.json (multiple_shooting_quick.json with --quick).
+With --general 7,14: the same for the shipped two-segment robot (a GeneralRobot with a point
+load at 0.1 m and a point mass at 0.3 m: 7 breakpoint intervals, K dividing 7 x steps), by
+tensions and by displacements (four tendons driven), tips and compliance compared; writes
+benchmarks/results/multiple_shooting_general.json.
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ import numpy as np
 from _common import timings, write_result
 
 import tdct_jax as tdct
+from tdct_jax.description import ROBOTS
+from tdct_jax.mechanics import compliance_and_solution
 
 STEPS = tdct.SolverOptions().steps
 
@@ -43,8 +49,11 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=STEPS)
     parser.add_argument("--quick", action="store_true", help="20 repeats")
     parser.add_argument("--intervals", help="compare single shooting with these K, e.g. 2,4,8")
+    parser.add_argument("--general", help="the same for the two-segment GeneralRobot, e.g. 7,14")
     args = parser.parse_args()
     repeats = 20 if args.quick else args.repeats
+    if args.general:
+        return compare_general(args, repeats, [int(k) for k in args.general.split(",")])
     if args.intervals:
         return compare_intervals(args, repeats, [int(k) for k in args.intervals.split(",")])
     out = Path(__file__).parent / "results" / f"latency{'_quick' if args.quick else ''}.json"
@@ -174,6 +183,52 @@ def compare_intervals(args, repeats, Ks):
         compile_and_first_solve_s={str(K): v for K, v in compile_s.items()},
         configs=rows,
         batch=dict(lanes=B, median_ms=batch_ms),
+    )
+    print(f"wrote {out}")
+
+
+def compare_general(args, repeats, Ks):
+    """``compare_intervals`` for the two-segment GeneralRobot with a point load and a point mass."""
+    out = Path(__file__).parent / "results" / f"multiple_shooting_general{'_quick' if args.quick else ''}.json"
+    robot = dataclasses.replace(tdct.Robot.from_toml(ROBOTS / "two_segment.toml"), masses=(tdct.PointMass(0.3, 0.005),))
+    load = tdct.Loads(tip_force=[0.02, 0, 0], point_s=[0.1], point_force=[[0.0, 0.05, -0.02]], point_moment=[[1e-3, 0, 5e-4]])
+    acts = {
+        "by tensions": tdct.GeneralActuation([1.5, 0.0, 0.4, 0.0, 0.8, 0.3]),
+        "by displacements (tendons 0, 2, 4, 5)": tdct.GeneralActuation(
+            np.zeros(6), displacements=[2e-3, 1e-3, 1e-3, 5e-4], driven=(0, 2, 4, 5)
+        ),
+    }
+    variants = {K: tdct.SolverOptions(steps=args.steps, intervals=K) for K in [1, *Ks]}
+    rows, compile_s = [], {}
+    for name, act in acts.items():
+        sols, C, times = {}, {}, {K: [] for K in variants}
+        for K, s in variants.items():
+            t0 = time.perf_counter()
+            C[K], sols[K] = compliance_and_solution(robot, act, load, solver=s)
+            compile_s[f"{name}, {K}"] = time.perf_counter() - t0
+        for _ in range(repeats):
+            for K, s in variants.items():
+                times[K].append(timings(lambda act=act, s=s: tdct.solve(robot, act, load, solver=s).position, 1)[0])
+        med = {K: float(np.median(t)) * 1e3 for K, t in times.items()}
+        row = dict(config=name, median_ms={str(K): m for K, m in med.items()}, ratio_to_single={}, iterations={})
+        for K in variants:
+            row["iterations"][str(K)] = int(sols[K].iterations)
+        for K in Ks:
+            row["ratio_to_single"][str(K)] = med[K] / med[1]
+            row.setdefault("path_difference_m", {})[str(K)] = float(np.max(np.abs(sols[K].position - sols[1].position)))
+            row.setdefault("tension_relative_difference", {})[str(K)] = _relative(sols[K].tensions, sols[1].tensions)
+            row.setdefault("compliance_relative_difference", {})[str(K)] = _relative(C[K], C[1])
+        rows.append(row)
+        print(name, "median ms", {K: round(m, 3) for K, m in med.items()}, "ratios", row["ratio_to_single"])
+        print("  path diff", row["path_difference_m"], "C", row["compliance_relative_difference"])
+    print(f"load average {os.getloadavg()}")
+    write_result(
+        out,
+        steps_per_segment=args.steps,
+        repeats=repeats,
+        load_average=os.getloadavg(),
+        compile_and_first_solve_s=compile_s,
+        configs=rows,
     )
     print(f"wrote {out}")
 

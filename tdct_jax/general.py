@@ -23,7 +23,8 @@ s rides in the state (s' = 1) so that every RK4 stage sees its own r_t(s). Where
 twist (``Tendon.twist`` None, static) r_t is constant and s is not carried: the paper's robot
 through this path then costs what it costs through ``Robot``'s.
 
-The intervals are what multiple shooting will use: ``plan`` gives each one's ends and parameters.
+Multiple shooting (multiple.py) cuts the same RK4 steps into K intervals of equal step count
+(``pieces``), each integrated from its own start by ``integrate``.
 """
 
 from __future__ import annotations
@@ -274,23 +275,69 @@ def with_driven(act: GeneralActuation, x, F_c) -> GeneralActuation:
     return GeneralActuation._rebuild(tensions, act.insertions, act.displacements, act.driven)
 
 
-def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solver, x, F_c, path: bool = False):
-    """Integrates every interval from the scaled unknowns x to the tip: x[:6] the base wrench
-    (N(0), M(0)), x[6:] the tensions of the displacement-driven tendons (act.driven) over F_c.
+class Pieces(NamedTuple):
+    """Consecutive RK4 pieces of equal step count (``pieces``): each one's segment parameters, arc
+    length at its start s0, step length h and the jump (dN, dM) applied at its start, (..., 3)."""
 
-    Returns:
-        The scaled residual: tip (6,), then per driven tendon phi(tau / F_c, (delta_shape -
-        delta) / L) with Fischer and Burmeister's phi(a, b) = a + b - |(a, b)|, zero where the
-        tendon is taut at its commanded displacement delta (b = 0, a >= 0) or slack (tau = 0, the
-        shape asking for more than was pulled: b > 0); and the tip State (with ``path``: the Carry
-        at every interval's steps + 1 nodes, shapes (K, steps + 1, ...), both sides of each
-        breakpoint, the node at an interval's start after that breakpoint's jump; and the plan).
-    """
-    act = with_driven(act, x, F_c)
-    pl = plan(robot, act, load, gravity)
-    L, n = robot.length, solver.steps
+    P: Interval
+    s0: jax.Array
+    h: jax.Array
+    dN: jax.Array
+    dM: jax.Array
+
+
+def n_intervals(robot: GeneralRobot, load: Loads) -> int:
+    """The number of breakpoint intervals of ``plan`` (static): one more than the interior
+    section ends, tubes, anchors not at the tip, point loads and point masses."""
+    anchored = sum(t.end is not None for t in robot.tendons)
+    return len(robot.sections) + robot.n_tubes + anchored + load.n_points + len(robot.masses)
+
+
+def shooting_intervals(robot: GeneralRobot, load: Loads, solver) -> int:
+    """RK4 steps per shooting interval, c = P steps / K (P: ``n_intervals``), checked: K must
+    divide P steps (ValueError naming ``intervals``, its value and the allowed values)."""
+    P, n, K = n_intervals(robot, load), solver.steps, solver.intervals
+    if (P * n) % K:
+        allowed = [k for k in range(1, P * n + 1) if (P * n) % k == 0]
+        raise ValueError(
+            f"intervals = {K}: a GeneralRobot with {P} breakpoint intervals of steps = {n} RK4 steps each is split into "
+            f"K intervals of equal step count, so K must divide {P} x {n} = {P * n}: one of {allowed} "
+            f"(every breakpoint an interval boundary for K = {P} q, q dividing {n})"
+        )
+    return P * n // K
+
+
+def pieces(pl: Plan, steps: int, K: int) -> tuple[Pieces, int]:
+    """The P breakpoint intervals' P steps RK4 steps as K shooting intervals of c = P steps / K
+    steps each: pieces of g = gcd(c, steps) steps (each inside one breakpoint interval), shaped
+    (K, c / g, ...), and g. The jump of each breakpoint goes with the first piece after it."""
+    P = pl.b.size - 1
+    c = P * steps // K
+    g = np.gcd(c, steps)
+    per = steps // g  # pieces per breakpoint interval
+    h = (pl.b[1:] - pl.b[:-1]) / steps
+    first = (np.arange(per) == 0)[None, :, None]
+
+    def jump(d):
+        return jnp.where(first, d[:-1, None], 0.0).reshape(P * per, 3)
+
+    ps = Pieces(
+        jax.tree.map(lambda a: jnp.repeat(a, per, axis=0), pl.intervals),
+        (pl.b[:-1, None] + h[:, None] * (g * np.arange(per))[None]).reshape(-1),
+        jnp.repeat(h, per),
+        jump(pl.dN),
+        jump(pl.dM),
+    )
+    return jax.tree.map(lambda a: a.reshape(K, c // g, *a.shape[1:]), ps), int(g)
+
+
+def integrate(robot: GeneralRobot, load: Loads, gravity, ps: Pieces, c: Carry, steps: int, path: bool = False):
+    """RK4 over consecutive pieces of ``steps`` steps (``pieces``, one shooting interval), each
+    after its jump, from the Carry c; tendon lengths where c.l is not None, arc length for helical
+    tendons. Returns the end Carry and the nodes (with ``path``: (pieces, steps + 1, ...), each
+    piece's first node after its jump)."""
+    helical, lengths = is_helical(robot), c.l is not None
     f_d = load.distributed_force
-    helical, lengths = is_helical(robot), bool(act.driven) or path
     r_fixed = None if helical else tendon_positions(robot, 0.0)[0]
 
     def field(P: Interval):
@@ -310,29 +357,51 @@ def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solv
     def project(c: Carry) -> Carry:
         return c._replace(y=c.y._replace(R=orthonormalize(c.y.R)))
 
-    def interval(c: Carry, k):
-        P, b0, b1, dN, dM = k
-        y = c.y._replace(N=c.y.N + dN, M=c.y.M + dM)
-        out = rk4(field(P), Carry(y, b0 if helical else None, c.l), jnp.reshape((b1 - b0) / n, (1,)), None, n, project, path)
+    def piece(c: Carry, k: Pieces):
+        y = c.y._replace(N=c.y.N + k.dN, M=c.y.M + k.dM)
+        out = rk4(field(k.P), Carry(y, k.s0 if helical else None, c.l), k.h[None], None, steps, project, path)
         end, nodes = out if path else (out, None)
         return end._replace(s=None), nodes
 
-    y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:6] * F_c * L)
-    end, nodes = lax.scan(
-        interval,
-        Carry(y0, None, jnp.zeros(robot.n_tendons) if lengths else None),
-        (pl.intervals, pl.b[:-1], pl.b[1:], pl.dN[:-1], pl.dM[:-1]),
-    )
-    N_L, M_L = end.y.N + pl.dN[-1], end.y.M + pl.dM[-1]
+    return lax.scan(piece, c._replace(s=None), ps)
+
+
+def closing(robot: GeneralRobot, act: GeneralActuation, load: Loads, pl: Plan, y: State, lengths, F_c):
+    """The scaled residual at the tip State y (before the jump at L) with the tendons' lengths:
+    tip (6,), then per driven tendon phi(tau / F_c, (delta_shape - delta) / L) (``shoot``); and
+    each tendon's slack flag (n_t,)."""
+    L = robot.length
+    N_L, M_L = y.N + pl.dN[-1], y.M + pl.dM[-1]
     res = [(N_L - load.tip_force) / F_c, (M_L - load.tip_moment) / (F_c * L)]
     slack = jnp.zeros(robot.n_tendons, bool)
     if act.driven:
         i = np.asarray(act.driven)
-        gap = displacements(robot, act, end.l)[i] - act.displacements
+        gap = displacements(robot, act, lengths)[i] - act.displacements
         a, b = act.tensions[i] / F_c, gap / L
         res.append(a + b - jnp.sqrt(a**2 + b**2))  # Fischer-Burmeister: zero iff a, b >= 0 and a b = 0
         slack = slack.at[i].set(b > a)
-    res = jnp.concatenate(res)
+    return jnp.concatenate(res), slack
+
+
+def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solver, x, F_c, path: bool = False):
+    """Integrates every interval from the scaled unknowns x to the tip: x[:6] the base wrench
+    (N(0), M(0)), x[6:] the tensions of the displacement-driven tendons (act.driven) over F_c.
+
+    Returns:
+        The scaled residual: tip (6,), then per driven tendon phi(tau / F_c, (delta_shape -
+        delta) / L) with Fischer and Burmeister's phi(a, b) = a + b - |(a, b)|, zero where the
+        tendon is taut at its commanded displacement delta (b = 0, a >= 0) or slack (tau = 0, the
+        shape asking for more than was pulled: b > 0); and the tip State (with ``path``: the Carry
+        at every interval's steps + 1 nodes, shapes (K, steps + 1, ...), both sides of each
+        breakpoint, the node at an interval's start after that breakpoint's jump; and the plan).
+    """
+    act = with_driven(act, x, F_c)
+    pl = plan(robot, act, load, gravity)
+    ps, _ = pieces(pl, solver.steps, 1)
+    y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:6] * F_c * robot.length)
+    l0 = jnp.zeros(robot.n_tendons) if act.driven or path else None
+    end, nodes = integrate(robot, load, gravity, jax.tree.map(lambda a: a[0], ps), Carry(y0, None, l0), solver.steps, path)
+    res, slack = closing(robot, act, load, pl, end.y, end.l, F_c)
     return (res, (nodes, pl, act, end.l, slack)) if path else (res, end.y)
 
 

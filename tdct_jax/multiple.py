@@ -1,24 +1,37 @@
-"""Multiple shooting: the paper robot's RK4 steps in K intervals integrated side by side (issue 24).
+"""Multiple shooting: a robot's RK4 steps in K intervals integrated side by side (issue 24).
 
-The 2 * steps steps of the one scan over both segments (``shooting.shoot``) split into K intervals
-of equal step count, each integrated with ``vmap`` from its own start State. The unknowns are
-the scaled base wrench x (6,), as in single shooting, and each interior interval's start: its
-rotation R_j and scaled total force n_j = N_j / F_c and moment m_j = M_j / (F_c L), K - 1 of
-each. Positions are not unknowns: the vector field does not depend on p (segments.py), so each
-interval runs from p = 0 and the positions are the running sum of the intervals' displacements.
-The residuals: continuity of (R, N, M) at each interior start, vee of the skew part of
-R_end R_j^T for the rotation (9 (K - 1)), then the tip condition (6), scaled as in shooting.py.
+The chain of RK4 steps of single shooting splits into K intervals of equal step count, each
+integrated with ``vmap`` from its own start State. The paper robot's chain is the 2 * steps
+steps of the one scan over both segments (``shooting.shoot``), K dividing 2 * steps. A
+GeneralRobot's is its P breakpoint intervals (``general.plan``) of ``steps`` steps each, K
+dividing P * steps (``general.shooting_intervals``): cut into pieces of g = gcd(P steps / K,
+steps) steps (``general.pieces``), each inside one breakpoint interval, P steps / (K g) of them an
+interval; K = P q (q dividing steps) makes every breakpoint a boundary, each breakpoint interval
+cut into q, and K dividing P gives each interval P / K whole breakpoint intervals. A breakpoint's
+jump (dN, dM: point loads and masses) is applied at the start of the piece after it, so at an
+interval's start where the breakpoint is a boundary: the start unknowns are the state before it.
 
-Each interval's end depends on its own start only, so the Jacobian is block bidiagonal. Its
-blocks A_j = d(end of interval j) / d(start), with the start's rotation perturbed as
-(I + w^) R_j, come from one ``jacfwd`` pass over all intervals at once. A Newton step eliminates
-the interior updates along the intervals (condensation): d xi_j = a_j + B_j dx, with
-d xi_0 = (0, dx), a_j = c_j + A_j-1 a_j-1 and B_j = A_j-1 B_j-1 (c_j: the continuity residual),
-leaving a 6x6 system T B_K-1 dx = -(r + T a_K-1) for the base (T: the tip rows), damped as
-``newton.newton`` damps it; rotations then move by the Cayley map. At the root T B_K-1 is the
-chain rule of single shooting's Jacobian, so the implicit derivatives and the compliance (eq. 41)
-are single shooting's. The chain of dependent operations is K times shorter; the arithmetic is
-that of single shooting with 9 tangents instead of 6.
+The unknowns are single shooting's scaled x (6 + n_d,): the base wrench, then a GeneralRobot's
+displacement-driven tensions, which enter every interval; and each interior interval's start:
+its rotation R_j and scaled total force n_j = N_j / F_c and moment m_j = M_j / (F_c L), K - 1 of
+each. Positions and tendon lengths are not unknowns: the vector field depends on neither, so
+each interval runs from p = 0, l = 0 and they are the running sums of the intervals'. The
+residuals: continuity of (R, N, M) at each interior start, vee of the skew part of R_end R_j^T
+for the rotation (9 (K - 1)), then single shooting's (tip, then the driven tendons'), scaled as
+in shooting.py.
+
+Each interval's end depends on its own start z_j = (R_j, n_j, m_j) and on the driven tensions t
+only, so the Jacobian is block bidiagonal plus the columns of t. Its blocks, with the start's
+rotation perturbed as (I + w^) R_j, come from one ``jacfwd`` pass over all intervals at once
+(9 + n_d tangents, each perturbing every interval's start alike). A Newton step eliminates the
+interior updates along the intervals (condensation): with z_j extended by t, d z_j = a_j + B_j dx,
+d z_0 = (0, dx), a_j = c_j + A_j-1 a_j-1 and B_j = A_j-1 B_j-1 (c_j: the continuity residual),
+leaving a (6 + n_d) system for x (the closing rows through the last end, and the tendon lengths
+through every interval), damped as ``newton.newton`` damps it; rotations then move by the Cayley
+map. At the root that system's matrix is the chain rule of single shooting's Jacobian, so the
+implicit derivatives and the compliance (eq. 41) are single shooting's. The chain of dependent
+operations is K times shorter; the arithmetic is that of single shooting with 9 + n_d tangents
+instead of 6 + n_d.
 """
 
 from __future__ import annotations
@@ -27,23 +40,26 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from . import shooting
+from . import general, shooting
 from .description import GeneralRobot
 from .newton import continuation, damped
 from .segments import State
 from .so3 import hat, orthonormalize
 
 N_START = 9
-"""Perturbations of an interval's start: rotation (3), scaled N (3), scaled M (3)."""
+"""Perturbations of an interval's start: rotation (3), scaled N (3), scaled M (3) (then the n_d
+driven tensions)."""
 
 ORTHONORMALIZE = 4
 """Newton-Schulz steps that bring the coarse pass's rotations onto SO(3): each squares the error."""
 
 
 class Unknowns(NamedTuple):
-    """Multiple shooting's unknowns: the scaled base wrench x (6,) and the interior starts' R
-    (K - 1, 3, 3), n = N / F_c and m = M / (F_c L) (K - 1, 3) each."""
+    """Multiple shooting's unknowns: the scaled x (6 + n_d,) of single shooting (base wrench, then
+    a GeneralRobot's displacement-driven tensions) and the interior starts' R (K - 1, 3, 3),
+    n = N / F_c and m = M / (F_c L) (K - 1, 3) each."""
 
     x: jax.Array
     R: jax.Array
@@ -52,23 +68,34 @@ class Unknowns(NamedTuple):
 
 
 class Blocks(NamedTuple):
-    """Newton's linearisation, per interval: A (K, 9, 9) d(end rotation vector about the next
-    start's R, n, m) / d(start), P (K, 3, 9) d(end position) / d(start), and D (3, 3, 9) d(tip R) /
-    d(start of the last interval)."""
+    """Newton's linearisation in each interval's z = (start R, n, m, driven tensions / F_c) (9 + n_d):
+    A (K, 9 + n_d, 9 + n_d) d(end rotation vector about the next start's R, n, m, then the
+    tensions) / dz, P (K, 3, 9 + n_d) d(end position) / dz, L (K, n_l, 9 + n_d) d(tendon lengths
+    along the interval) / dz, D (3, 3, 9 + n_d) d(tip R) / dz of the last interval, and H
+    (6 + n_d, 6 + n_l + n_d) d(closing residual) / d(tip n, m, total lengths, tensions / F_c)."""
 
     A: jax.Array
     P: jax.Array
+    L: jax.Array
     D: jax.Array
+    H: jax.Array
 
 
-def check(robot, solver) -> None:
-    """Raises for what multiple shooting does not cover (a GeneralRobot, the paper's variants)."""
+def check(robot, load, solver) -> None:
+    """Raises for an interval count multiple shooting cannot take (ValueError naming ``intervals``)
+    and for the paper's variants."""
     K = solver.intervals
-    if K > 1 and isinstance(robot, GeneralRobot):
-        raise NotImplementedError(
-            f"solver intervals = {K}: multiple shooting covers the paper's tdct.Robot only; solve a GeneralRobot with intervals = 1"
+    if K == 1:
+        return
+    if isinstance(robot, GeneralRobot):
+        general.shooting_intervals(robot, load, solver)
+        return
+    if (2 * solver.steps) % K:
+        raise ValueError(
+            f"intervals = {K} must divide the 2 * steps = {2 * solver.steps} RK4 steps of the two segments "
+            f"(one of {[k for k in range(1, 2 * solver.steps + 1) if (2 * solver.steps) % k == 0]})"
         )
-    if K > 1 and (solver.transition != "balanced" or solver.tendon_model != "exact"):
+    if solver.transition != "balanced" or solver.tendon_model != "exact":
         raise ValueError(
             f"solver intervals = {K} with transition = {solver.transition!r}, tendon_model = {solver.tendon_model!r}: "
             "multiple shooting needs the 'balanced' transition and the 'exact' tendon model (one scan over both segments); "
@@ -90,15 +117,21 @@ def _cayley(w):
 
 
 def _intervals(robot, act, solver):
-    """Per-step segments and step lengths of the one scan over both segments, (K, 2 steps / K, ...)."""
+    """The paper robot's one scan over both segments as K intervals of c = 2 steps / K steps:
+    pieces of g = gcd(c, steps) steps (``shooting.per_piece``), their segments and step lengths
+    (K, c / g, ...), and g."""
     back, sil = shooting.segments(robot, act, solver)
     n, K = solver.steps, solver.intervals
-    (seg_b, h_b), (seg_s, h_s) = (
-        shooting.per_step(back, act.insertion, n),
-        shooting.per_step(sil, robot.length - act.insertion, n),
+    c = 2 * n // K
+    g = int(np.gcd(c, n))
+
+    def split(seg, length):  # a segment's n steps as n / g pieces
+        return jax.tree.map(lambda a: jnp.repeat(a, n // g, axis=0), shooting.per_piece(seg, length, n))
+
+    both = jax.tree.map(
+        lambda a, b: jnp.concatenate([a, b]), split(back, act.insertion), split(sil, robot.length - act.insertion)
     )
-    both = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), (seg_b, h_b), (seg_s, h_s))
-    return jax.tree.map(lambda a: a.reshape(K, 2 * n // K, *a.shape[1:]), both)
+    return jax.tree.map(lambda a: a.reshape(K, c // g, *a.shape[1:]), both), g
 
 
 def _starts(u: Unknowns, F_c, L):
@@ -109,81 +142,164 @@ def _starts(u: Unknowns, F_c, L):
     return R, N, M
 
 
-def _residual(u: Unknowns, ends: State, load, F_c, L):
-    """Continuity at every interior start (K - 1, 9), flattened, then the tip residual (6,)."""
+class Run(NamedTuple):
+    """The intervals integrated side by side (``run``): end States (K, ...) from p = 0, tendon
+    lengths along each interval (K, n_l; n_l = 0 where none are needed), the actuation with the
+    driven tensions and the plan (a GeneralRobot's; None for the paper robot), and the nodes
+    (``path``; None otherwise)."""
+
+    ends: State
+    lengths: jax.Array
+    act: object
+    plan: object
+    nodes: object
+
+
+def run(robot, act, load, gravity, solver, x, starts, F_c, path: bool = False) -> Run:
+    """Every interval integrated from its start (R, N, M) (K, ...): the paper robot's RK4 steps cut
+    into K (``_intervals``), a GeneralRobot's breakpoint intervals cut by ``general.pieces``, its
+    driven tensions from x[6:] in every interval."""
+    R, N, M = starts
+    K = solver.intervals
+    y0 = State(jnp.zeros((K, 3)), R, N, M)
+    if not isinstance(robot, GeneralRobot):
+        (segs, h), g = _intervals(robot, act, solver)
+        out = jax.vmap(lambda seg, h, y: shooting.integrate(seg, y, h, gravity, path, g))(segs, h, y0)
+        y, nodes = out if path else (out, None)
+        return Run(y, jnp.zeros((K, 0)), act, None, nodes)
+    act = general.with_driven(act, x, F_c)
+    pl = general.plan(robot, act, load, gravity)
+    ps, g = general.pieces(pl, solver.steps, K)
+    l0 = jnp.zeros((K, robot.n_tendons)) if act.driven or path else None
+    end, nodes = jax.vmap(lambda p, c: general.integrate(robot, load, gravity, p, c, g, path))(ps, general.Carry(y0, None, l0))
+    return Run(end.y, jnp.zeros((K, 0)) if l0 is None else end.l, act, pl, nodes)
+
+
+def _closing(robot, load, r: Run, N, M, lengths, x, F_c):
+    """The closing residual at the tip's N, M (before the jump at L) with the tendon lengths summed
+    over the intervals and x: tip (6,), then a GeneralRobot's driven tendons (``general.closing``);
+    and its slack flags (None for the paper robot)."""
+    L = robot.length
+    if not isinstance(robot, GeneralRobot):
+        return jnp.concatenate([(N - load.force) / F_c, (M - load.moment) / (F_c * L)]), None
+    act = general.with_driven(r.act, x, F_c)
+    return general.closing(robot, act, load, r.plan, State(None, None, N, M), lengths, F_c)
+
+
+def _closing_at(robot, load, u: Unknowns, r: Run, F_c):
+    """``_closing`` at the last interval's end."""
+    return _closing(robot, load, r, r.ends.N[-1], r.ends.M[-1], jnp.sum(r.lengths, 0), u.x, F_c)
+
+
+def _residual(robot, load, u: Unknowns, r: Run, F_c):
+    """Continuity at every interior start (K - 1, 9), flattened, then the closing residual (6 + n_d,)."""
+    ends, L = r.ends, robot.length
     cont = jnp.concatenate(
         [_vee_skew(ends.R[:-1] @ jnp.swapaxes(u.R, -1, -2)), ends.N[:-1] / F_c - u.n, ends.M[:-1] / (F_c * L) - u.m], -1
     )
-    tip = jnp.concatenate([(ends.N[-1] - load.force) / F_c, (ends.M[-1] - load.moment) / (F_c * L)])
-    return jnp.concatenate([cont.reshape(-1), tip])
+    return jnp.concatenate([cont.reshape(-1), _closing_at(robot, load, u, r, F_c)[0]])
 
 
-def ends(robot, act, load, gravity, solver, u: Unknowns, F_c, path: bool = False):
-    """Every interval's end State, integrated side by side from its start (p = 0), (K, ...), and
-    the residual (``_residual``); with ``path`` the States at every interval's nodes (K, 2 steps / K + 1, ...)."""
-    segs, h = _intervals(robot, act, solver)
-    y = jax.vmap(lambda seg, h, R, N, M: shooting.integrate(seg, State(jnp.zeros(3), R, N, M), h, gravity, path))(
-        segs, h, *_starts(u, F_c, robot.length)
-    )
-    return (y[1], _residual(u, y[0], load, F_c, robot.length)) if path else (y, _residual(u, y, load, F_c, robot.length))
+def evaluate(robot, act, load, gravity, solver, u: Unknowns, F_c, path: bool = False):
+    """The residual (``_residual``) at u and the Run of the intervals from their starts."""
+    r = run(robot, act, load, gravity, solver, u.x, _starts(u, F_c, robot.length), F_c, path)
+    return _residual(robot, load, u, r, F_c), r
 
 
 def linearize(robot, act, load, gravity, solver, u: Unknowns, F_c):
-    """The residual at u and its Blocks, from one forward-mode pass over all intervals."""
-    L = robot.length
-    segs, h = _intervals(robot, act, solver)
+    """The residual at u and its Blocks, from one forward-mode pass over all intervals at once:
+    one perturbation w of every interval's z (each interval's end depends on its own start, and
+    every interval on the driven tensions)."""
+    L, n_d = robot.length, u.x.size - 6
+    R, N, M = _starts(u, F_c, L)
     R_next = jnp.concatenate([u.R, jnp.eye(3)[None]])  # the last interval's rotation rows are unused
 
-    def one(seg, h, R, N, M, R_ref):
-        def end(w):
-            y = shooting.integrate(
-                seg, State(jnp.zeros(3), R + hat(w[:3]) @ R, N + F_c * w[3:6], M + F_c * L * w[6:]), h, gravity
-            )
-            return (jnp.concatenate([_vee_skew(y.R @ R_ref.T), y.N / F_c, y.M / (F_c * L)]), y.p, y.R), y
+    def ends(w):
+        x = u.x.at[6:].add(w[9:])
+        starts = (hat(w[:3])[None] @ R + R, N + F_c * w[None, 3:6], M + F_c * L * w[None, 6:9])
+        r = run(robot, act, load, gravity, solver, x, starts, F_c)
+        y = r.ends
+        z = jnp.concatenate([_vee_skew(y.R @ jnp.swapaxes(R_next, -1, -2)), y.N / F_c, y.M / (F_c * L)], -1)
+        return (z, y.p, r.lengths, y.R[-1]), r
 
-        (A, P, D), y = jax.jacfwd(end, has_aux=True)(jnp.zeros(N_START))
-        return y, A, P, D
+    (Z, P, Lj, D), r = jax.jacfwd(ends, has_aux=True)(jnp.zeros(N_START + n_d))
+    K = Z.shape[0]
+    tensions = jnp.broadcast_to(jnp.eye(N_START + n_d)[N_START:], (K, n_d, N_START + n_d))
+    n_l = Lj.shape[1]
 
-    y, A, P, D = jax.vmap(one)(segs, h, *_starts(u, F_c, L), R_next)
-    return _residual(u, y, load, F_c, L), Blocks(A, P, D[-1])
+    def closing(v):  # v: tip n, m, total lengths, x[6:]
+        x = u.x.at[6:].set(v[6 + n_l :])
+        return _closing(robot, load, r, v[:3] * F_c, v[3:6] * (F_c * L), v[6 : 6 + n_l], x, F_c)[0]
+
+    v = jnp.concatenate([r.ends.N[-1] / F_c, r.ends.M[-1] / (F_c * L), jnp.sum(r.lengths, 0), u.x[6:]])
+    H = jax.jacfwd(closing)(v)
+    return _residual(robot, load, u, r, F_c), Blocks(jnp.concatenate([Z, tensions], 1), P, Lj, D, H)
 
 
 def _condense(A, c):
-    """Interior updates as functions of the base update: d xi_j = a_j + B_j dx for every
-    interval's start, a (K, 9) and B (K, 9, 6), from the continuity right-hand sides c (K - 1, 9)."""
-    a, B = [jnp.zeros(N_START)], [jnp.zeros((N_START, 6)).at[3:].set(jnp.eye(6))]
+    """Every interval's z as a function of the update dX of x: dz_j = a_j + B_j dX, a (K, 9 + n_d)
+    and B (K, 9 + n_d, 6 + n_d), from the continuity right-hand sides c (K - 1, 9)."""
+    m = A.shape[-1]
+    a, B = [jnp.zeros(m)], [jnp.zeros((m, m - 3)).at[3:].set(jnp.eye(m - 3))]
     for j in range(A.shape[0] - 1):
-        a.append(c[j] + A[j] @ a[-1])
+        a.append(jnp.zeros(m).at[:N_START].set(c[j]) + A[j] @ a[-1])
         B.append(A[j] @ B[-1])
     return jnp.stack(a), jnp.stack(B)
 
 
+def _closing_rows(blocks: Blocks):
+    """d(closing residual) / d(last z) (6 + n_d, 9 + n_d) and / d(total lengths) (6 + n_d, n_l)."""
+    H, n_l = blocks.H, blocks.L.shape[1]
+    last = H[:, :6] @ blocks.A[-1, 3:N_START]
+    return last.at[:, N_START:].add(H[:, 6 + n_l :]), H[:, 6 : 6 + n_l]
+
+
+def _reduce(blocks: Blocks, r):
+    """The condensed system: J dX = -rhs for x (6 + n_d), and the a, B of ``_condense``."""
+    n_x = blocks.H.shape[0]
+    a, B = _condense(blocks.A, r[:-n_x].reshape(-1, N_START))
+    last, H_l = _closing_rows(blocks)
+    J = last @ B[-1] + H_l @ jnp.einsum("kij,kjl->il", blocks.L, B)
+    rhs = r[-n_x:] + last @ a[-1] + H_l @ jnp.einsum("kij,kj->i", blocks.L, a)
+    return J, rhs, a, B
+
+
 def _step(u: Unknowns, r, blocks: Blocks, mu):
-    """The Levenberg-Marquardt step by condensation: the 6x6 base update, then the interiors."""
-    a, B = _condense(blocks.A, r[:-6].reshape(-1, N_START))
-    T = blocks.A[-1, 3:]
-    J, rhs = T @ B[-1], r[-6:] + T @ a[-1]
-    dx = -jnp.linalg.solve(J.T @ J + mu * jnp.eye(6), J.T @ rhs)
+    """The Levenberg-Marquardt step by condensation: the (6 + n_d) system for x, then the interiors."""
+    J, rhs, a, B = _reduce(blocks, r)
+    dx = -jnp.linalg.solve(J.T @ J + mu * jnp.eye(J.shape[0]), J.T @ rhs)
     d = a[1:] + B[1:] @ dx
-    return Unknowns(u.x + dx, _cayley(d[:, :3]) @ u.R, u.n + d[:, 3:6], u.m + d[:, 6:])
+    return Unknowns(u.x + dx, _cayley(d[:, :3]) @ u.R, u.n + d[:, 3:6], u.m + d[:, 6:N_START])
 
 
 def jacobians(blocks: Blocks):
-    """Single shooting's Jacobians d(tip residual) / dx (6, 6), d(tip p) / dx (3, 6) and d(tip R) / dx
-    (3, 3, 6) by the chain rule along the intervals (at a root: RootInfo.jacobians)."""
-    _, B = _condense(blocks.A, jnp.zeros((blocks.A.shape[0] - 1, N_START)))
-    return blocks.A[-1, 3:] @ B[-1], (jnp.einsum("kij,kjl->il", blocks.P, B), blocks.D @ B[-1])
+    """Single shooting's Jacobians d(residual) / dx (6 + n_d, 6 + n_d), d(tip p) / dx (3, 6 + n_d)
+    and d(tip R) / dx (3, 3, 6 + n_d) by the chain rule along the intervals (at a root:
+    RootInfo.jacobians)."""
+    J, _, _, B = _reduce(blocks, jnp.zeros((blocks.A.shape[0] - 1) * N_START + blocks.H.shape[0]))
+    return J, (jnp.einsum("kij,kjl->il", blocks.P, B), blocks.D @ B[-1])
 
 
 def coarse(robot, act, load, gravity, solver, x, F_c) -> Unknowns:
-    """Interior starts from the scaled base wrench x by one cheap pass: one RK4 step per interval."""
-    segs, h = _intervals(robot, act, solver)
-    y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:6] * F_c * robot.length)
-    _, ys = shooting.integrate(jax.tree.map(lambda a: a[:, 0], segs), y0, h.sum(1), gravity, path=True)
-    R = ys.R[1:-1]
+    """Interior starts from the scaled x by one cheap pass: one RK4 step per interval (the paper
+    robot) or per piece of ``general.pieces`` (a GeneralRobot)."""
+    L = robot.length
+    y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:6] * F_c * L)
+    if isinstance(robot, GeneralRobot):
+        act = general.with_driven(act, x, F_c)
+        ps, g = general.pieces(general.plan(robot, act, load, gravity), solver.steps, solver.intervals)
+        flat = jax.tree.map(lambda a: a.reshape(-1, *a.shape[2:]), ps)._replace(h=ps.h.reshape(-1) * g)
+        _, nodes = general.integrate(robot, load, gravity, flat, general.Carry(y0), 1, path=True)
+        ys = jax.tree.map(lambda a: a[ps.h.shape[1] - 1 :: ps.h.shape[1], 1][:-1], nodes.y)
+    else:
+        (segs, h), g = _intervals(robot, act, solver)
+        lengths = jnp.repeat(h, g, axis=1).sum(1)
+        _, ys = shooting.integrate(jax.tree.map(lambda a: a[:, 0], segs), y0, lengths, gravity, path=True)
+        ys = jax.tree.map(lambda a: a[1:-1], ys)
+    R = ys.R
     for _ in range(ORTHONORMALIZE):  # a long step leaves R off SO(3); Newton's steps keep it on
         R = jax.vmap(orthonormalize)(R)
-    return Unknowns(x, R, ys.N[1:-1] / F_c, ys.M[1:-1] / (F_c * robot.length))
+    return Unknowns(x, R, ys.N / F_c, ys.M / (F_c * L))
 
 
 @jax.custom_jvp
@@ -192,7 +308,7 @@ def root(robot, act, load, gravity, guess, solver):
     Jacobians single shooting's, by ``jacobians``). Newton starts from ``guess`` (as
     ``shooting.root``) or the straight rod, the interiors from ``coarse``; each load stage of the
     continuation from the straight rod at that stage."""
-    check(robot, solver)
+    check(robot, load, solver)
     F_c = shooting.force_scale(robot, act, load, gravity)
     x0, x_straight = shooting.starts(robot, act, load, gravity, guess, F_c)
 
@@ -213,26 +329,40 @@ def root(robot, act, load, gravity, guess, solver):
 
 @root.defjvp
 def _root_jvp(primals, tangents):
-    """Implicit differentiation: the continuity and tip residuals' input tangents condensed
-    along the intervals as in ``_step``, one 6x6 solve for dx, then the interiors'."""
+    """Implicit differentiation: the continuity and closing residuals' input tangents condensed
+    along the intervals as in ``_step``, one (6 + n_d) solve for dx, then the interiors'."""
     robot, act, load, gravity, guess, solver = primals
     u, info = root(*primals)
     F_c = shooting.force_scale(robot, act, load, gravity)
     _, blocks = linearize(robot, act, load, gravity, solver, u, F_c)
-    _, dr = jax.jvp(lambda r, a, l, g: ends(r, a, l, g, solver, u, F_c)[1], primals[:4], tangents[:4])
-    a, B = _condense(blocks.A, dr[:-6].reshape(-1, N_START))
-    T = blocks.A[-1, 3:]
-    dx = -jnp.linalg.solve(T @ B[-1], dr[-6:] + T @ a[-1])
+    _, dr = jax.jvp(lambda r, a, l, g: evaluate(r, a, l, g, solver, u, F_c)[0], primals[:4], tangents[:4])
+    J, rhs, a, B = _reduce(blocks, dr)
+    dx = -jnp.linalg.solve(J, rhs)
     d = a[1:] + B[1:] @ dx
-    du = Unknowns(dx, hat(d[:, :3]) @ u.R, d[:, 3:6], d[:, 6:])
+    du = Unknowns(dx, hat(d[:, :3]) @ u.R, d[:, 3:6], d[:, 6:N_START])
     return (u, info), (du, jax.tree.map(shooting.zero_tangent, info))
 
 
 def path(robot, act, load, gravity, solver, u: Unknowns):
-    """The tip residual (6,) and the States at all 2 * steps + 1 nodes (``shooting.shoot``'s
-    path) from the Unknowns, the intervals integrated side by side; each interior start node is
-    the previous interval's end."""
-    ys, r = ends(robot, act, load, gravity, solver, u, shooting.force_scale(robot, act, load, gravity), path=True)
-    offsets = jnp.cumsum(ys.p[:, -1], 0) - ys.p[:, -1]
-    ys = ys._replace(p=ys.p + offsets[:, None])
-    return r[-6:], jax.tree.map(lambda a: jnp.concatenate([a[0], a[1:, 1:].reshape(-1, *a.shape[2:])]), ys)
+    """``shooting.shoot``'s residual and path from the Unknowns, the intervals integrated side by
+    side: the paper robot's States at all 2 * steps + 1 nodes, a GeneralRobot's (nodes, plan,
+    actuation, lengths, slack) as ``general.shoot`` gives them (each interior start node the
+    previous interval's end)."""
+    F_c = shooting.force_scale(robot, act, load, gravity)
+    res, r = evaluate(robot, act, load, gravity, solver, u, F_c, path=True)
+    n_x = u.x.size
+    tail = res[-n_x:]
+    offsets = jnp.cumsum(r.ends.p, 0) - r.ends.p
+    if not isinstance(robot, GeneralRobot):
+        ys = r.nodes._replace(p=r.nodes.p + offsets[:, None])
+        return tail, jax.tree.map(lambda a: jnp.concatenate([a[0], a[1:, 1:].reshape(-1, *a.shape[2:])]), ys)
+    ys = r.nodes.y._replace(p=r.nodes.y.p + offsets[:, None, None])
+    n_b, per = r.plan.b.size - 1, solver.steps // (r.nodes.y.p.shape[2] - 1)
+
+    def by_breakpoint_interval(a):  # pieces (K, c / g, g + 1, ...) -> (P, steps + 1, ...)
+        a = a.reshape(n_b, per, *a.shape[2:])
+        return jnp.concatenate([a[:, 0], a[:, 1:, 1:].reshape(n_b, -1, *a.shape[3:])], 1)
+
+    lengths = jnp.sum(r.lengths, 0)
+    slack = _closing_at(robot, load, u, r, F_c)[1]
+    return tail, (general.Carry(jax.tree.map(by_breakpoint_interval, ys)), r.plan, r.act, lengths, slack)

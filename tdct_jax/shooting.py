@@ -73,11 +73,6 @@ def unscaled(robot: Robot, x, F_c):
     return jnp.concatenate([x[:3] * F_c, x[3:6] * (F_c * robot.length), x[6:] * F_c])
 
 
-def per_step(seg: Segment, length, n: int):
-    """A segment's parameters broadcast to its n RK4 steps, and the step lengths, (n, ...) each."""
-    return jax.tree.map(lambda a: jnp.broadcast_to(a, (n, *jnp.shape(a))), seg), jnp.full(n, length / n)
-
-
 def per_piece(seg: Segment, length, n: int):
     """A segment as one RK4 piece of n steps (``integrate``'s ``steps``): its parameters and step
     length with a leading axis of 1."""
@@ -86,8 +81,8 @@ def per_piece(seg: Segment, length, n: int):
 
 def integrate(segs: Segment, y: State, h, gravity, path: bool = False, steps: int = 1):
     """RK4 from the State y over pieces of ``steps`` steps of length h[j] with segments ``segs``
-    (``per_piece``; one step each by default, ``per_step``), R projected back onto SO(3) after each
-    step; with ``path`` also the States at every node."""
+    (``per_piece``), R projected back onto SO(3) after each step; with ``path`` also the States at
+    every node."""
 
     def project(y):
         return y._replace(R=orthonormalize(y.R))

@@ -95,7 +95,10 @@ def solution_and_compliance(robot: Robot, act: Actuation, load: TipLoad, gravity
     if solver.intervals > 1:  # multiple shooting: the path from the intervals, side by side
         u, info = multiple.root(robot, act, load, gravity, guess, solver)
         res, ys = multiple.path(robot, act, load, gravity, solver, u)
-        sol = _assemble(robot, act, solver, ys, res, info)
+        if isinstance(robot, GeneralRobot):
+            sol = _assemble_general(robot, act, load, gravity, ys, res, info)
+        else:
+            sol = _assemble(robot, act, solver, ys, res, info)
     else:
         x, info = root(robot, act, load, gravity, guess, solver)
         sol = solution_at(robot, act, load, gravity, solver, x, info)
@@ -253,12 +256,12 @@ def solve_arguments(robot, act, load, gravity, guess, solver) -> tuple:
     if isinstance(robot, GeneralRobot):
         act, load = GeneralActuation.of(act, robot.n_tubes), Loads.of(load)
         general.check_arguments(robot, act, load, solver)
-        multiple.check(robot, solver)
+        multiple.check(robot, load, solver)
         guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
         return robot, act, load, *_on_cpu(gravity_vector(gravity), guess), solver
     load = TipLoad() if load is None else load
     check_inputs(robot, act, load, solver)
-    multiple.check(robot, solver)
+    multiple.check(robot, load, solver)
     robot.warn_outside_calibration(act.tensions, load.force)
     guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
     gravity, guess = _on_cpu(gravity_vector(gravity), guess)

@@ -3,6 +3,7 @@ and independently validated solver: the same root, so the same tips, paths, impl
 and compliance to the solver's tolerance."""
 
 import dataclasses
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -11,7 +12,10 @@ import pytest
 from conftest import rel_err
 
 import tdct_jax as tdct
-from tdct_jax import status
+from tdct_jax import fields, status
+from tdct_jax.mechanics import compliance_and_solution
+
+ROBOTS = Path(tdct.__file__).parent / "robots"
 
 TIP_TOL = 1e-10
 """Tips and paths [m]: both roots within the Newton tolerance of the same exact root."""
@@ -99,10 +103,7 @@ def test_non_convergence_is_reported(robot):
         tdct.solve(robot, act, load, solver=solver)
 
 
-@pytest.mark.parametrize(
-    "value, words",
-    [(0, ["intervals = 0", ">= 1"]), (3, ["intervals = 3", "40"]), (2.0, ["intervals = 2.0", "integer"])],
-)
+@pytest.mark.parametrize("value, words", [(0, ["intervals = 0", ">= 1"]), (2.0, ["intervals = 2.0", "integer"])])
 def test_bad_intervals(value, words):
     with pytest.raises(ValueError) as e:
         tdct.SolverOptions(intervals=value)
@@ -110,9 +111,100 @@ def test_bad_intervals(value, words):
         assert w in str(e.value)
 
 
+def test_interval_count_must_divide_the_steps(robot):
+    """Checked against the robot (its step count is the paper robot's 2 x 20, a GeneralRobot's
+    breakpoint intervals x 20) before anything compiles."""
+    act = tdct.Actuation((1.0, 0, 0, 0), 0.05)
+    with pytest.raises(ValueError, match=r"intervals = 3 must divide the 2 \* steps = 40 .*one of \[1, 2, 4, 5, 8"):
+        tdct.solve(robot, act, solver=tdct.SolverOptions(intervals=3))
+    general, loads = _general_robot()
+    with pytest.raises(ValueError) as e:
+        tdct.solve(general, tdct.GeneralActuation(GENERAL_TENSIONS), loads, solver=tdct.SolverOptions(intervals=3))
+    for w in ["intervals = 3", "7 breakpoint intervals", "7 x 20 = 140", "[1, 2, 4, 5, 7, 10, 14, 20, 28, 35, 70, 140]"]:
+        assert w in str(e.value)
+
+
 def test_unsupported_combinations(robot):
     act = tdct.Actuation((1.0, 0, 0, 0), 0.05)
     with pytest.raises(ValueError, match="intervals = 2 with transition = 'paper'"):
         tdct.solve(robot, act, solver=tdct.SolverOptions(intervals=2, transition="paper"))
-    with pytest.raises(NotImplementedError, match="intervals = 2: multiple shooting covers the paper's tdct.Robot only"):
-        tdct.solve(robot.to_general(), act, solver=tdct.SolverOptions(intervals=2))
+
+
+# ---- a GeneralRobot: intervals between its breakpoints ------------------------------------------
+
+GENERAL_TENSIONS = (1.5, 0.0, 0.4, 0.0, 0.8, 0.3)
+DRIVEN = (0, 2, 4, 5)
+DISPLACEMENTS = (2e-3, 1e-3, 1e-3, 5e-4)
+G = (0.0, 0.0, -9.81)
+K_GENERAL = 14
+"""Twice the 7 breakpoint intervals of ``_general_robot``: every breakpoint a boundary, each
+breakpoint interval cut in two."""
+
+
+def _general_robot():
+    """The shipped two-segment robot (three tendons anchored at 0.2 m, three at the tip) with a
+    point mass at 0.3 m, a point force and moment at 0.1 m and a tip load: 0, 0.2 (section end and
+    three anchors), 0.1, 0.3 and L, 7 breakpoint intervals (three of zero length)."""
+    robot = tdct.Robot.from_toml(ROBOTS / "two_segment.toml")
+    robot = dataclasses.replace(robot, masses=(tdct.PointMass(0.3, 0.005),))
+    loads = tdct.Loads(
+        tip_force=[0.02, 0.0, 0.0],
+        tip_moment=[0.0, 0.0, 2e-3],
+        point_s=[0.1],
+        point_force=[[0.0, 0.05, -0.02]],
+        point_moment=[[1e-3, 0.0, 5e-4]],
+    )
+    return robot, loads
+
+
+GENERAL_CASES = {
+    "tensions": tdct.GeneralActuation(GENERAL_TENSIONS),
+    "displacements": tdct.GeneralActuation(np.zeros(6), displacements=DISPLACEMENTS, driven=DRIVEN),
+}
+
+
+@pytest.fixture(scope="module")
+def general_solutions():
+    """(compliance, Solution) of single and multiple shooting, per actuation."""
+    robot, loads = _general_robot()
+    return {
+        name: [
+            compliance_and_solution(robot, act, loads, gravity=G, solver=tdct.SolverOptions(intervals=k)) for k in (1, K_GENERAL)
+        ]
+        for name, act in GENERAL_CASES.items()
+    }
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", GENERAL_CASES)
+def test_general_robot_same_solution_as_single_shooting(general_solutions, name):
+    (C1, single), (CK, multi) = general_solutions[name]
+    assert multi.converged
+    assert multi.position.shape == single.position.shape
+    np.testing.assert_allclose(multi.position, single.position, rtol=0, atol=TIP_TOL)
+    np.testing.assert_allclose(multi.rotation, single.rotation, rtol=0, atol=TIP_TOL)
+    np.testing.assert_allclose(multi.s, single.s, rtol=0, atol=1e-15)
+    # both sides of each breakpoint: the jumps at the point load and mass land where single shooting has them
+    assert rel_err(multi.total_force, single.total_force) < DERIVATIVE_TOL
+    assert rel_err(multi.total_moment, single.total_moment) < DERIVATIVE_TOL
+    assert rel_err(multi.tensions, single.tensions) < DERIVATIVE_TOL
+    np.testing.assert_allclose(multi.displacements, single.displacements, rtol=0, atol=TIP_TOL)
+    assert list(np.asarray(multi.slack)) == list(np.asarray(single.slack))
+    assert rel_err(CK, C1) < DERIVATIVE_TOL  # with driven tendons: displacements held
+
+
+@pytest.mark.slow
+def test_general_robot_implicit_derivatives():
+    """d tip / d(tensions, E of every section) by implicit differentiation."""
+    robot, loads = _general_robot()
+
+    def derivatives(solver):
+        def tip(v):
+            r = fields.replace(robot, {"sections[*].E": v[6]})
+            return tdct.solve(r, tdct.GeneralActuation(v[:6]), loads, gravity=G, solver=solver, throw=False).tip_position
+
+        return jax.jacfwd(tip)(jnp.array([*GENERAL_TENSIONS, float(robot.sections[0].E)]))
+
+    D1, DK = derivatives(tdct.SolverOptions()), derivatives(tdct.SolverOptions(intervals=K_GENERAL))
+    for j in range(D1.shape[1]):  # each input's column on its own scale
+        assert rel_err(DK[:, j], D1[:, j]) < DERIVATIVE_TOL
