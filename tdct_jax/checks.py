@@ -13,6 +13,8 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from .tree import set_fields
+
 
 def is_concrete(x) -> bool:
     """True for values a user passed in; False for tracers (inside jit, vmap, grad) and None."""
@@ -69,6 +71,17 @@ def check_integer(name: str, x, lo: int = 1) -> int:
     if isinstance(x, bool) or not isinstance(x, (int, np.integer)) or x < lo:
         raise ValueError(f"{name} = {x!r} must be an integer >= {lo}")
     return int(x)
+
+
+def check_iteration(options, tol: str, limit: str, prefix: str = "") -> None:
+    """An options pytree's tolerance field ``tol`` (> 0, as a float) and step limit ``limit`` (an
+    integer >= 1), each checked and normalised in place where concrete (leaves may be traced)."""
+    if is_concrete(getattr(options, tol)):
+        value = as_array(prefix + tol, getattr(options, tol), ())
+        check_range(prefix + tol, value, 0.0, lo_open=True)
+        set_fields(options, **{tol: float(value)})
+    if is_concrete(getattr(options, limit)):
+        set_fields(options, **{limit: check_integer(prefix + limit, getattr(options, limit))})
 
 
 def check_choice(name: str, x, choices: tuple) -> None:

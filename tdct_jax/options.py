@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import itertools
 
-from .checks import as_array, check_choice, check_integer, check_range, is_concrete
+from .checks import check_choice, check_integer, check_iteration
 from .tree import pytree, set_fields, static
 
 TRANSITIONS = ("balanced", "paper")
@@ -66,12 +66,7 @@ class SolverOptions:
         if stages[0] < 1 or any(b <= a for a, b in itertools.pairwise(stages)):
             raise ValueError(f"stages = {stages}: expected positive integers in increasing order, e.g. {STAGES}")
         set_fields(self, stages=stages)
-        if is_concrete(self.tol):
-            tol = as_array("tol", self.tol, ())
-            check_range("tol", tol, 0.0, lo_open=True)
-            set_fields(self, tol=float(tol))
-        if is_concrete(self.max_iter):
-            set_fields(self, max_iter=check_integer("max_iter", self.max_iter))
+        check_iteration(self, "tol", "max_iter")
 
 
 DEFAULT_SOLVER = SolverOptions()

@@ -3,8 +3,8 @@ and ``track`` beside ``solver=``."""
 
 from __future__ import annotations
 
-from ..checks import as_array, check_choice, check_integer, check_range, is_concrete
-from ..tree import pytree, set_fields, static
+from ..checks import check_choice, check_iteration
+from ..tree import pytree, static
 
 TOL = 1e-10
 """Default tolerance on the scaled task residual: position error / L (and orientation error [rad])."""
@@ -32,12 +32,7 @@ class IKOptions:
 
     def __post_init__(self):
         check_choice("IKOptions.method", self.method, METHODS)
-        if is_concrete(self.tol):
-            tol = as_array("IKOptions.tol", self.tol, ())
-            check_range("IKOptions.tol", tol, 0.0, lo_open=True)
-            set_fields(self, tol=float(tol))
-        if is_concrete(self.max_steps):
-            set_fields(self, max_steps=check_integer("IKOptions.max_steps", self.max_steps))
+        check_iteration(self, "tol", "max_steps", prefix="IKOptions.")
 
 
 DEFAULT_IK = IKOptions()
