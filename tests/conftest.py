@@ -29,6 +29,10 @@ jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
 
+LOG = os.environ.get("TDCT_COMPILE_LOG")
+"""A file to which each real compile appends a line: the test, the jitted function's name, seconds."""
+
+
 class CompileCounter:
     """The XLA programs this process builds, split into real compiles and loads from the session's
     compilation cache (a program another worker compiled first), with the test that asked for each.
@@ -49,7 +53,7 @@ class CompileCounter:
         if event == self.HIT:
             self._hit = True
 
-    def on_duration(self, event, seconds, **_):
+    def on_duration(self, event, seconds, fun_name="?", **_):
         if event != self.BUILD:
             return
         if self._hit:
@@ -57,6 +61,9 @@ class CompileCounter:
         else:
             entry = self.per_test.setdefault(self.test, [0, 0.0])
             entry[0], entry[1] = entry[0] + 1, entry[1] + seconds
+            if LOG:
+                with open(LOG, "a") as log:
+                    log.write(f"{self.test}\t{fun_name}\t{seconds:.2f}\n")
 
     def report(self) -> dict:
         return {"hits": self.hits, "per_test": self.per_test}

@@ -126,11 +126,12 @@ def test_each_failure_kind_has_its_code_and_raises_its_own_message(robot, code):
 def test_result_codes_per_lane_under_jit_and_vmap(robot):
     tensions = np.array([[6.0, 0, 0, 0], [400.0, 0, 0, 0], [0.0, 3.0, 0, 0]])
 
-    def code(solver):
-        def one(tau):
-            return tdct.solve(robot, tdct.Actuation(tau, 0.0), solver=solver, throw=False).result
+    @jax.jit
+    def codes(solver):  # the options are an argument, their numbers leaves: one program serves both calls
+        return jax.vmap(lambda tau: tdct.solve(robot, tdct.Actuation(tau, 0.0), solver=solver, throw=False).result)(tensions)
 
-        return np.asarray(jax.jit(jax.vmap(one))(tensions)).tolist()
+    def code(solver):
+        return np.asarray(codes(solver)).tolist()
 
     assert code(tdct.SolverOptions()) == [tdct.status.SUCCESS, tdct.status.NONFINITE, tdct.status.SUCCESS]
     assert code(tdct.SolverOptions(max_iter=1)) == [tdct.status.NEWTON_LIMIT] * 3

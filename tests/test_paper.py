@@ -50,7 +50,8 @@ def test_highest_reach_is_the_maximum_of_the_tip_height(robot):
     assert abs(height(10.0, d + 5e-3) - height(10.0, d + 5e-3 - 2 * h)) / (2 * h) > 1e-2  # the old answer's slope
     dtau = 1e-4
     assert (height(10.0, d) - height(10.0 - dtau, d)) / dtau == pytest.approx(top.slope_tension, rel=1e-3)
-    scan = np.linspace(d - 2e-3, d + 2e-3, 41)
-    res = tdct.sweep(robot, tdct.Actuation((10.0, 0, 0, 0)), load, grid={"insertion": scan}, progress=False)
-    assert res.tip_position[:, 1].max() <= top.height + 1e-12
-    assert abs(scan[np.argmax(res.tip_position[:, 1])] - d) <= 0.05e-3 + 1e-12
+    scan = np.linspace(d - 2e-3, d + 2e-3, 41)  # a grid of highest_reach's form: its compiled program serves
+    res = tdct.sweep(robot, None, load, grid={"tensions": [[10.0, 0, 0, 0]], "insertion": scan}, progress=False)
+    scan_height = res.tip_position[0, :, 1]
+    assert scan_height.max() <= top.height + 1e-12
+    assert abs(scan[np.argmax(scan_height)] - d) <= 0.05e-3 + 1e-12

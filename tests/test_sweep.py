@@ -49,11 +49,21 @@ def test_batch_of_robot_fields_zips_points(robot):
         np.testing.assert_allclose(res.compliance[k], tdct.compliance(r, act), rtol=1e-9)
 
 
+# three paths of six tensions, one path per compiled call (the parts test splits the three chunks
+# between two processes): both tests run one compiled program
+WARM = dict(
+    grid={"insertion": np.array([0.0, 0.05, 0.1]), "tensions": np.outer(np.linspace(0.0, 10.0, 6), [1.0, 0.0, 0.0, 0.0])},
+    warm_start=True,
+    chunk_size=1,
+    progress=False,
+)
+
+
 @pytest.mark.slow
 def test_warm_started_path_matches_cold_solves(robot):
-    grid = {"insertion": np.array([0.0, 0.1]), "tensions": np.outer(np.linspace(0.0, 10.0, 6), [1.0, 0.0, 0.0, 0.0])}
+    grid = WARM["grid"]
     cold = tdct.sweep(robot, grid=grid, progress=False)
-    warm = tdct.sweep(robot, grid=grid, warm_start=True, progress=False)
+    warm = tdct.sweep(robot, **WARM)
     assert warm.n_failed == 0
     np.testing.assert_allclose(warm.tip_position, cold.tip_position, rtol=0, atol=1e-9)
     print(f"Newton iterations along the tension path: cold {cold.iterations.sum()}, warm {warm.iterations.sum()}")
@@ -171,15 +181,13 @@ def test_chunks_arrive_in_order_and_join_to_the_sweep(robot, small_chunk_sweep):
 
 def test_parts_of_a_warm_started_sweep_gather_to_the_whole(robot, tmp_path, monkeypatch):
     """Two processes, simulated in this one: each writes its paths; gather joins them."""
-    grid = {"tip_mass": np.array([0.0, 0.02, 0.04]), "tensions": np.outer([0.0, 5.0], [1.0, 0.0, 0.0, 0.0])}
-    options = dict(grid=grid, warm_start=True, chunk_size=1, solver=tdct.SolverOptions(steps=4), progress=False)
-    whole = tdct.sweep(robot, **options)
+    whole = tdct.sweep(robot, **WARM)
     for k in range(2):
         monkeypatch.setattr(jax, "process_count", lambda: 2)
         monkeypatch.setattr(jax, "process_index", lambda k=k: k)
         with pytest.raises(ValueError, match="needs out="):
-            tdct.sweep(robot, **options)
-        assert tdct.sweep(robot, out=tmp_path / "w.npz", **options).name == f"w.part{k}-of-2.npz"
+            tdct.sweep(robot, **WARM)
+        assert tdct.sweep(robot, out=tmp_path / "w.npz", **WARM).name == f"w.part{k}-of-2.npz"
     monkeypatch.undo()
     assert_same_sweep(tdct.gather(tmp_path / "w.npz"), whole)
     with pytest.raises(ValueError, match="holds one part"):
