@@ -4,7 +4,8 @@ compilation cache, and the number of while loops (shooting scans run inside them
 Entries on the paper robot: one target without and with an objective (all four tendons and the
 insertion free), a batch of 8 targets, ``track`` over 4 targets; and ``tdct ik --target-mm`` as a
 whole cold process (TDCT_COMPILE_CACHE=off, the CLI's cache switched off). Compile time is the
-first call less a warm call of the same program. Goals (issue 24): every IK plan under 10 s, a
+first call less a warm call of the same program; for the single-target programs also split into
+tracing and XLA's compile, with their sizes. Goals (issue 24): every IK plan under 10 s, a
 cold ``tdct ik`` under 15 s.
 
 Run: python benchmarks/compile_times.py
@@ -52,8 +53,12 @@ def child(expression: str) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def while_loops() -> dict:
-    """While loops in the lowered single-target programs (without and with an objective)."""
+def program_sizes() -> dict:
+    """The single-target programs (without and with an objective) lowered and compiled in this
+    process (no cache): tracing and lowering seconds, XLA compile seconds (CPU time of the
+    process, which other processes' load changes less than wall time), lines of StableHLO and
+    while loops (shooting scans run inside them)."""
+    import jax
     import numpy as np
 
     import tdct_jax as tdct
@@ -61,15 +66,26 @@ def while_loops() -> dict:
     from tdct_jax.ik.arguments import _problem
     from tdct_jax.ik.driver import _solve_ik
 
-    counts = {}
+    jax.config.update("jax_enable_compilation_cache", False)
+    sizes = {}
     robot, load = tdct.Robot(), tdct.TipLoad.from_mass(0.01)
     for name, objective in (("one target", None), ("one target, stiffness objective", "stiffness")):
         prob, plan, v0, wrench0 = _problem(
             **_arguments(robot, tdct.Target(np.array([0.0, 0.03, 0.14])), load=load, objective=objective)
         )
-        text = _solve_ik.lower(prob, v0, wrench0, plan).as_text()
-        counts[name] = text.count("stablehlo.while")
-    return counts
+        t = time.process_time()
+        lowered = _solve_ik.lower(prob, v0, wrench0, plan)
+        lower_cpu_s = time.process_time() - t
+        text = lowered.as_text()
+        t = time.process_time()
+        lowered.compile()
+        sizes[name] = dict(
+            lower_cpu_s=lower_cpu_s,
+            compile_cpu_s=time.process_time() - t,
+            hlo_lines=text.count("\n"),
+            while_loops=text.count("stablehlo.while"),
+        )
+    return sizes
 
 
 def main() -> None:
@@ -79,9 +95,8 @@ def main() -> None:
     t = time.perf_counter()
     subprocess.run(["tdct", "ik", "--target-mm", "0,30,140", "--json"], env=env, capture_output=True, text=True, check=False)
     results["tdct ik --target-mm 0,30,140 (whole process)"] = dict(first_s=time.perf_counter() - t)
-    loops = while_loops()
-    for name, n in loops.items():
-        results[name]["while_loops"] = n
+    for name, size in program_sizes().items():
+        results[name].update(size)
     for name, r in results.items():
         print(f"{name:48s} " + ", ".join(f"{k} {v:.2f}" if isinstance(v, float) else f"{k} {v}" for k, v in r.items()))
     write_result(

@@ -3,6 +3,8 @@ start."""
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -149,16 +151,22 @@ def _problem(
         options=ik,
     )
     if guess is None:
-        forces = jnp.broadcast_to(jnp.asarray(_tip_force(load)), jnp.shape(target.position))
-        start = (
-            jax.vmap(lambda p, f: default_start(prob, plan, p, f))(target.position, forces)
-            if batched
-            else default_start(prob, plan, target.position, _tip_force(load))
-        )
+        start = _default_starts(prob, plan)
     else:
         start = jnp.clip(scaled_inputs(base, prob, plan), prob.lo, prob.hi)
         start = jnp.broadcast_to(start, (len(target.position),) + start.shape) if batched else start
     return prob, plan, start, jnp.full(6 + len(getattr(base, "driven", ())), jnp.nan)
+
+
+@functools.partial(jax.jit, static_argnames=("plan",))
+def _default_starts(prob: Problem, plan: Plan):
+    """``default_start`` at the target position, or at each of a batch of them: one compiled
+    program (op by op it would compile each of its few dozen operations on first use)."""
+    positions = prob.target.position
+    if jnp.ndim(positions) == 2:
+        forces = jnp.broadcast_to(_tip_force(prob.load), jnp.shape(positions))
+        return jax.vmap(lambda p, f: default_start(prob, plan, p, f))(positions, forces)
+    return default_start(prob, plan, positions, _tip_force(prob.load))
 
 
 def _free_tubes(tubes, insertion, n_tubes: int, is_general: bool) -> tuple:
