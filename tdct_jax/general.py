@@ -293,9 +293,9 @@ def n_intervals(robot: GeneralRobot, load: Loads) -> int:
     return len(robot.sections) + robot.n_tubes + anchored + load.n_points + len(robot.masses)
 
 
-def shooting_intervals(robot: GeneralRobot, load: Loads, solver) -> int:
-    """RK4 steps per shooting interval, c = P steps / K (P: ``n_intervals``), checked: K must
-    divide P steps (ValueError naming ``intervals``, its value and the allowed values)."""
+def check_intervals(robot: GeneralRobot, load: Loads, solver) -> None:
+    """Raises unless the shooting intervals K divide the P steps RK4 steps (P: ``n_intervals``),
+    naming ``intervals``, its value and the allowed values."""
     P, n, K = n_intervals(robot, load), solver.steps, solver.intervals
     if (P * n) % K:
         allowed = [k for k in range(1, P * n + 1) if (P * n) % k == 0]
@@ -304,7 +304,6 @@ def shooting_intervals(robot: GeneralRobot, load: Loads, solver) -> int:
             f"K intervals of equal step count, so K must divide {P} x {n} = {P * n}: one of {allowed} "
             f"(every breakpoint an interval boundary for K = {P} q, q dividing {n})"
         )
-    return P * n // K
 
 
 def pieces(pl: Plan, steps: int, K: int) -> tuple[Pieces, int]:

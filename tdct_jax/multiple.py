@@ -4,7 +4,7 @@ The chain of RK4 steps of single shooting splits into K intervals of equal step 
 integrated with ``vmap`` from its own start State. The paper robot's chain is the 2 * steps
 steps of the one scan over both segments (``shooting.shoot``), K dividing 2 * steps. A
 GeneralRobot's is its P breakpoint intervals (``general.plan``) of ``steps`` steps each, K
-dividing P * steps (``general.shooting_intervals``): cut into pieces of g = gcd(P steps / K,
+dividing P * steps (``general.check_intervals``): cut into pieces of g = gcd(P steps / K,
 steps) steps (``general.pieces``), each inside one breakpoint interval, P steps / (K g) of them an
 interval; K = P q (q dividing steps) makes every breakpoint a boundary, each breakpoint interval
 cut into q, and K dividing P gives each interval P / K whole breakpoint intervals. A breakpoint's
@@ -88,7 +88,7 @@ def check(robot, load, solver) -> None:
     if K == 1:
         return
     if isinstance(robot, GeneralRobot):
-        general.shooting_intervals(robot, load, solver)
+        general.check_intervals(robot, load, solver)
         return
     if (2 * solver.steps) % K:
         raise ValueError(

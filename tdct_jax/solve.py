@@ -95,10 +95,7 @@ def solution_and_compliance(robot: Robot, act: Actuation, load: TipLoad, gravity
     if solver.intervals > 1:  # multiple shooting: the path from the intervals, side by side
         u, info = multiple.root(robot, act, load, gravity, guess, solver)
         res, ys = multiple.path(robot, act, load, gravity, solver, u)
-        if isinstance(robot, GeneralRobot):
-            sol = _assemble_general(robot, act, load, gravity, ys, res, info)
-        else:
-            sol = _assemble(robot, act, solver, ys, res, info)
+        sol = _assembled(robot, act, load, gravity, solver, ys, res, info)
     else:
         x, info = root(robot, act, load, gravity, guess, solver)
         sol = solution_at(robot, act, load, gravity, solver, x, info)
@@ -110,6 +107,11 @@ def solution_at(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: So
     """The Solution at the scaled base unknowns x of a root found elsewhere (``info``: its
     iterations, stages and result code), by one integration along the path."""
     res, ys = shoot(robot, act, load, gravity, solver, x, force_scale(robot, act, load, gravity), path=True)
+    return _assembled(robot, act, load, gravity, solver, ys, res, info)
+
+
+def _assembled(robot, act, load, gravity, solver, ys, res, info) -> Solution:
+    """The Solution from a path ``ys`` as ``shoot`` (or ``multiple.path``) gives it, for either robot."""
     if isinstance(robot, GeneralRobot):
         return _assemble_general(robot, act, load, gravity, ys, res, info)
     return _assemble(robot, act, solver, ys, res, info)
