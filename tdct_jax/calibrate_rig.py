@@ -4,9 +4,10 @@ the prediction of a held-out recording with the fitted values frozen.
 Any robot field and any rig value (``rig.py``: servo scale, pretensions, registration, gravity's
 direction) is fitted by Levenberg-Marquardt with bounds on the tip residuals, model minus
 measured in the measurement frame, with the Jacobian exact: forward-mode autodiff through the
-implicitly differentiated displacement-driven solve of every sample. Each fit step starts every
-sample from its solution at the previous step (side by side); the first step, and any step where
-a sample fails from there, solves along the recorded sequence instead (``rig.along``).
+implicitly differentiated displacement-driven solve of every sample. The first step solves along
+the recorded sequence (``rig.along``); every later one starts each sample from its solution at the
+step before, side by side, and a trial where some sample fails that way counts as a failed step
+(Levenberg-Marquardt then takes a shorter one).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 from functools import partial
+from pathlib import Path
 from time import perf_counter
 
 import jax
@@ -31,9 +33,9 @@ from .recording import Recording, check_tendons
 RIG_SOLVER = SolverOptions(steps=8)
 """Solver for recordings: 8 RK4 steps per interval between breakpoints moves the tips of the
 three-segment example by under 0.1 um against 40 steps, far below any motion capture's noise."""
-RIG_PARAMS = ("sections[*].E", "scale", "pretension[*]", "rotation[0]", "rotation[1]", "translation[0]", "translation[1]", "translation[2]")
-"""A default fit: the backbone's modulus, the servo scale, one pretension and the registration
-(rotation about the robot axis is left to the tendon angles, with which it is degenerate)."""
+RIG_PARAMS = ("sections[*].E", "scale", "rotation[0]", "rotation[1]", "translation[0]", "translation[1]", "translation[2]")
+"""A default fit: the backbone's modulus, the servo scale and the registration (rotation about the
+robot axis is left to the tendon angles, with which it is degenerate)."""
 
 
 def _values(x, params) -> dict:
@@ -50,7 +52,7 @@ def _fit_step(x, rig, servos, guesses, measured, params, solver):
     """Tip residuals (3 n,) [m], their exact Jacobian in x, the unknowns found and status codes."""
 
     def residual(x):
-        tip, unknowns, code = rigs._batch(rigs.replace(rig, _values(x, params)), servos, guesses, solver)
+        tip, unknowns, code = rigs._batch(rigs.replace(rig, _values(x, params)), servos, guesses, rigs.quick(solver))
         r = (tip - measured).ravel()
         return r, (r, unknowns, code)
 
@@ -123,7 +125,10 @@ class RigCalibration:
         i, j = np.triu_indices(len(self.params), 1)
         strong = sorted(zip(np.abs(self.correlation[i, j]), i, j, strict=True), reverse=True)[:5]
         if strong:
-            lines.append("\nstrongest correlations: " + ", ".join(f"{self.params[a]} ~ {self.params[b]} {self.correlation[a, b]:+.2f}" for _, a, b in strong))
+            lines.append(
+                "\nstrongest correlations: "
+                + ", ".join(f"{self.params[a]} ~ {self.params[b]} {self.correlation[a, b]:+.2f}" for _, a, b in strong)
+            )
         b, a = self.before, self.after
         lines.append(
             f"\ntip error, mean offset removed: RMSE {1e3 * b['rmse']:.2f} -> {1e3 * a['rmse']:.2f} mm "
@@ -189,21 +194,17 @@ def calibrate_rig(
     bar = tqdm(desc="calibrating", unit="step", disable=not progress, leave=False)
     bar.set_postfix_str("solving along the recording (compiling)")
     guesses = [rigs.along(rig, servos, solver)[1]]
-    history = []
+    history, first = [], []
 
     def evaluate(x):
         r, J, unknowns, codes = _fit_step(jnp.asarray(x), rig, servos, guesses[0], measured, params, solver)
-        if np.any(np.asarray(codes) != status.SUCCESS):
-            trial = rigs.replace(rig, {p: float(v) for p, v in _values(np.asarray(x), params).items()})
-            guesses[0] = rigs.along(trial, servos, solver)[1]
-            r, J, unknowns, codes = _fit_step(jnp.asarray(x), rig, servos, guesses[0], measured, params, solver)
         codes = np.asarray(codes)
         if np.all(codes == status.SUCCESS):
             guesses[0] = unknowns
         r = np.asarray(r)
+        first[:] = first or [r]
         history[:] = history or [float(np.sqrt(np.mean(r**2) * 3))]
-        bad = np.flatnonzero(codes)
-        return r, np.asarray(J), int(codes[bad[0]]) if bad.size else status.SUCCESS, r
+        return r, np.asarray(J), _first(codes), r
 
     def report(it, r, step):
         history.append(float(np.sqrt(np.mean(r**2) * 3)))
@@ -225,7 +226,7 @@ def calibrate_rig(
         std_errors={p: float(scale[i] * se_x[i]) for i, p in enumerate(params)},
         correlation=correlation,
         rig=fitted,
-        before=rigs.errors(np.asarray(measured) + _residual_tips(history, fit, x0, evaluate), measured),
+        before=rigs.errors(measured + first[0].reshape(-1, 3), measured),
         after=rigs.errors(measured + fit.aux.reshape(-1, 3), measured),
         history=tuple(history),
         noise=float(np.sqrt(s2)),
@@ -236,10 +237,6 @@ def calibrate_rig(
     )
     status.check(fit.result, throw=throw, what=f"the rig calibration of {', '.join(params)}", max_steps=max_steps)
     return result
-
-
-def _residual_tips(history, fit, x0, evaluate):
-    raise NotImplementedError
 
 
 def _bounds(params, initial, bounds):
@@ -272,7 +269,8 @@ class Prediction:
         errors: tip errors with the mean offset removed (``rig.errors``).
         per_pattern: {pattern family: errors}, the family a pattern without its trailing
             ``_dir<angle>``, the offset removed being the whole recording's.
-        seconds_per_pose: wall time of one warm pass along the recording over its samples.
+        seconds_per_pose: wall time of one pass along the recording (compiled before) over its
+            samples.
     """
 
     tips: np.ndarray
@@ -294,7 +292,7 @@ class Prediction:
 
 def predict(rig: rigs.Rig, recording: Recording, *, solver: SolverOptions = RIG_SOLVER) -> Prediction:
     """The model's tips for a recording's servo readings alone (along the sequence, warm-started
-    sample by sample), and their errors against its measured tips."""
+    sample by sample, as a controller would run it), and their errors against its measured tips."""
     servos = jnp.asarray(_servos(rig, recording))
     jax.block_until_ready(rigs.along(rig, servos, solver))
     t = perf_counter()
@@ -308,10 +306,46 @@ def predict(rig: rigs.Rig, recording: Recording, *, solver: SolverOptions = RIG_
     for f in dict.fromkeys(families):
         m = ok & (families == f)
         e = np.linalg.norm(tips[m] + errors["offset"] - measured[m], axis=1)
-        per_pattern[f] = dict(rmse=float(np.sqrt(np.mean(e**2))), mean=float(e.mean()), median=float(np.median(e)), p95=float(np.percentile(e, 95)), n=int(e.size))
+        per_pattern[f] = dict(
+            rmse=float(np.sqrt(np.mean(e**2))),
+            mean=float(e.mean()),
+            median=float(np.median(e)),
+            p95=float(np.percentile(e, 95)),
+            n=int(e.size),
+        )
     return Prediction(tips, measured, recording.patterns(), codes, errors, per_pattern, seconds)
 
 
 def _family(pattern: str) -> str:
     head, _, tail = pattern.rpartition("_dir")
     return head if head and tail.isdigit() else pattern
+
+
+def synthesize_recording(
+    rig: rigs.Rig, servos, *, noise: float = 0.0, seed: int = 0, labels=None, solver: SolverOptions = RIG_SOLVER
+) -> Recording:
+    """A recording made by the model: the rig's tips for servo readings (n, n_t) [m] along the
+    sequence, plus Gaussian noise of standard deviation ``noise`` [m] on every coordinate (numpy's
+    generator seeded with ``seed``); for checking a calibration against known values.
+
+    Raises:
+        ValueError: bad shapes or noise; ConvergenceError: a sample that did not solve.
+    """
+    servos = np.asarray(servos, float)
+    if servos.ndim != 2 or servos.shape[1] != rig.robot.n_tendons:
+        raise ValueError(f"servos has shape {servos.shape}: (samples, {rig.robot.n_tendons}) expected, one per tendon")
+    if not (np.isfinite(noise) and noise >= 0):
+        raise ValueError(f"noise = {noise!r} must be a finite standard deviation >= 0 [m]")
+    tip, _, codes = rigs.along(rig, jnp.asarray(servos), solver)
+    status.check(_first(np.asarray(codes)), throw=True, what="synthesize_recording", max_iter=solver.max_iter)
+    tip = np.asarray(tip) + noise * np.random.default_rng(seed).standard_normal((len(servos), 3))
+    n, k = servos.shape
+    labels = np.full(n, "synthetic") if labels is None else np.asarray(labels, dtype=str)
+    columns = (("label", "label", ""), *(("displacements", f"d{i + 1}_m", "m") for i in range(k)))
+    columns += tuple(("tip", f"tip_{c}_m", "m") for c in "xyz")
+    return Recording("synthetic", Path("synthetic"), labels, None, servos, None, None, tip, columns, np.arange(2, n + 2))
+
+
+def _first(codes) -> int:
+    bad = np.flatnonzero(codes)
+    return int(codes[bad[0]]) if bad.size else status.SUCCESS

@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import re
 from collections.abc import Mapping
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -34,7 +35,7 @@ import numpy as np
 from jax import lax
 
 from . import fields, general, status
-from .checks import as_array, check_range, is_concrete
+from .checks import as_array, check_range, is_concrete, read_toml
 from .description import GeneralRobot
 from .inputs import GeneralActuation, Loads
 from .loads import STANDARD_GRAVITY
@@ -44,6 +45,9 @@ from .tree import pytree, set_fields
 
 RAMP = 8
 """Sub-steps of the actuation ramp from the last converged sample when a warm start fails."""
+QUICK_ITER = 12
+"""Newton's step limit, in one load stage, for a solve warm-started from a neighbouring solution
+(``quick``): such a solve takes 2-5 steps, and a lane that fails fails fast."""
 _VECTORS = {"pretension": None, "rotation": 3, "translation": 3}
 _SCALARS = ("scale", "gravity_azimuth", "gravity_elevation", "g")
 _LINEAR = ("pretension", "rotation", "translation", "gravity_azimuth", "gravity_elevation")
@@ -85,13 +89,61 @@ class Rig:
             self,
             pretension=as_array("Rig.pretension", pretension, (n,) if is_concrete(pretension) else None, unit=" N"),
             rotation=as_array("Rig.rotation", self.rotation, (3,) if is_concrete(self.rotation) else None, unit=" rad"),
-            translation=as_array(
-                "Rig.translation", self.translation, (3,) if is_concrete(self.translation) else None, unit=" m"
-            ),
+            translation=as_array("Rig.translation", self.translation, (3,) if is_concrete(self.translation) else None, unit=" m"),
         )
         check_range("Rig.pretension", self.pretension, 0.0, unit=" N")
         check_range("Rig.scale", self.scale, 0.0, lo_open=True)
         check_range("Rig.g", self.g, 0.0, unit=" m/s^2")
+
+    @classmethod
+    def from_toml(cls, path) -> Rig:
+        """A robot file with a ``[rig]`` table (docs/recordings.md): the robot and its rig values,
+        angles in degrees there; a file without the table gives the defaults.
+
+        Raises:
+            ValueError: naming the file and key, for a bad robot file or ``[rig]`` table.
+        """
+        path = Path(path)
+        data = read_toml(path, "robot file")
+        robot = GeneralRobot.from_table(data, path)
+        table = data.get("rig", {})
+        keys = {"scale": 1.0, "pretension": None, "rotation_deg": (0.0, 0.0, 0.0), "translation": (0.0, 0.0, 0.0)}
+        keys |= {"gravity_azimuth_deg": 0.0, "gravity_elevation_deg": -90.0, "g": STANDARD_GRAVITY}
+        unknown = sorted(set(table) - set(keys)) if isinstance(table, dict) else ["(not a table)"]
+        if unknown:
+            raise ValueError(f"robot file {path}: [rig] has unknown key(s) {unknown}; allowed: {list(keys)}")
+        v = keys | table
+        try:
+            return cls(
+                robot,
+                scale=v["scale"],
+                pretension=v["pretension"],
+                rotation=np.radians(np.asarray(v["rotation_deg"], float)),
+                translation=v["translation"],
+                gravity_azimuth=np.radians(v["gravity_azimuth_deg"]),
+                gravity_elevation=np.radians(v["gravity_elevation_deg"]),
+                g=v["g"],
+            )
+        except (ValueError, TypeError) as e:
+            raise ValueError(f"robot file {path}: [rig]: {e}") from e
+
+    def to_toml(self) -> str:
+        """The robot file text with the ``[rig]`` table (``from_toml`` reads it back)."""
+        deg = np.degrees
+        return self.robot.to_toml() + "\n".join(
+            [
+                "",
+                "[rig]",
+                f"scale = {float(self.scale)!r}",
+                f"pretension = {[float(x) for x in np.asarray(self.pretension)]!r}          # [N]",
+                f"rotation_deg = {[float(x) for x in deg(np.asarray(self.rotation))]!r}     # rotation vector",
+                f"translation = {[float(x) for x in np.asarray(self.translation)]!r}      # [m]",
+                f"gravity_azimuth_deg = {float(deg(self.gravity_azimuth))!r}",
+                f"gravity_elevation_deg = {float(deg(self.gravity_elevation))!r}",
+                f"g = {float(self.g)!r}",
+                "",
+            ]
+        )
 
     @property
     def gravity(self):
@@ -212,9 +264,16 @@ def solve_sample(rig: Rig, servo, guess, solver: SolverOptions = DEFAULT_SOLVER)
     return rig.to_measured(tip.p), unscaled(robot, x, F_c), info.result.astype(jnp.int32)
 
 
+def quick(solver: SolverOptions) -> SolverOptions:
+    """The solver for warm starts: at most ``QUICK_ITER`` Newton steps and no load continuation."""
+    return dataclasses.replace(solver, max_iter=min(solver.max_iter, QUICK_ITER), stages=(1,))
+
+
 def _along(rig: Rig, servos, solver: SolverOptions):
     """``solve_sample`` along a recorded sequence, each sample warm-started from the last
-    converged one, and when that fails, reached by a ramp of ``RAMP`` sub-steps from it."""
+    converged one, and when that fails, reached by a ramp of ``RAMP`` sub-steps from it. One
+    chain, not vmapped pieces: under vmap every ``lax.cond`` of the solver runs both branches,
+    which costs more than the lanes gain on a CPU."""
     n = _unknowns(rig.robot)
 
     def step(carry, servo):
