@@ -168,6 +168,8 @@ def calibrate_rig(
         rig: the robot on its rig with the starting values and every value not fitted.
         recording: servo readings (``displacements``) and measured tips (``recording.py``).
         params: names to fit (``rig.py``; robot fields as in ``fields.py``, ranges ``[a-b]``).
+            Fitted ``translation`` components start at the mean offset between the measured tips
+            and the model's at the start (their least-squares value there).
         bounds: {name: (lo, hi)} in SI units; pretensions are kept >= 0 unless given.
         max_steps: most Levenberg-Marquardt trial steps. xtol: converged when the bounded
             Gauss-Newton step moves no coordinate by more than this (relative for values fitted
@@ -187,13 +189,16 @@ def calibrate_rig(
         rigs.check_name(rig, p)
     max_steps = check_integer("max_steps", max_steps)
     servos, measured = jnp.asarray(_servos(rig, recording)), jnp.asarray(recording.tip)
-    initial = {p: rigs.value(rig, p) for p in params}
-    lo, hi = _bounds(params, initial, bounds or {})
-
     start = perf_counter()
     bar = tqdm(desc="calibrating", unit="step", disable=not progress, leave=False)
     bar.set_postfix_str("solving along the recording (compiling)")
-    guesses = [rigs.along(rig, servos, solver)[1]]
+    tip, unknowns, _ = rigs.along(rig, servos, solver)
+    guesses = [unknowns]
+    offset = np.mean(np.asarray(measured) - np.asarray(tip), axis=0)
+    shifted = {f"translation[{i}]": float(rig.translation[i] + offset[i]) for i in range(3)}
+    rig = rigs.replace(rig, {k: v for k, v in shifted.items() if k in params})
+    initial = {p: rigs.value(rig, p) for p in params}
+    lo, hi = _bounds(params, initial, bounds or {})
     history, first = [], []
 
     def evaluate(x):

@@ -47,7 +47,7 @@ def test_a_range_shares_one_value_among_its_items(two):
 @pytest.mark.parametrize(
     "name, words",
     [
-        ("sections[2].E", "2 sections (indices 0 to 1)"),
+        ("sections[2].E", "2 sections (indices 0 to 1, or a range a-b with a <= b)"),
         ("tendon[0].offset", "not a scalar GeneralRobot field"),
         ("tendons[0].radius", "tendons[i, * or a-b].{offset, angle"),
         ("E_silicone", "not a scalar GeneralRobot field"),
