@@ -6,8 +6,8 @@ direction) is fitted by Levenberg-Marquardt with bounds on the tip residuals, mo
 measured in the measurement frame, with the Jacobian exact: forward-mode autodiff through the
 implicitly differentiated displacement-driven solve of every sample. The first step solves along
 the recorded sequence (``rig.along``); every later one starts each sample from its solution at the
-step before, side by side, and a trial where some sample fails that way counts as a failed step
-(Levenberg-Marquardt then takes a shorter one).
+step before, side by side (Newton with its load continuation), and a trial where some sample still
+fails counts as a failed step (Levenberg-Marquardt then takes a shorter one).
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ def _fit_step(x, rig, servos, guesses, measured, params, solver):
     """Tip residuals (3 n,) [m], their exact Jacobian in x, the unknowns found and status codes."""
 
     def residual(x):
-        tip, unknowns, code = rigs._batch(rigs.replace(rig, _values(x, params)), servos, guesses, rigs.quick(solver))
+        tip, unknowns, code = rigs._batch(rigs.replace(rig, _values(x, params)), servos, guesses, solver)
         r = (tip - measured).ravel()
         return r, (r, unknowns, code)
 
@@ -158,6 +158,7 @@ def calibrate_rig(
     bounds: Mapping[str, tuple] | None = None,
     max_steps: int = 40,
     xtol: float = 1e-6,
+    ftol: float = 1e-8,
     solver: SolverOptions = RIG_SOLVER,
     progress: bool = True,
     throw: bool = True,
@@ -173,7 +174,8 @@ def calibrate_rig(
         bounds: {name: (lo, hi)} in SI units; pretensions are kept >= 0 unless given.
         max_steps: most Levenberg-Marquardt trial steps. xtol: converged when the bounded
             Gauss-Newton step moves no coordinate by more than this (relative for values fitted
-            in log space).
+            in log space); ftol: or when a step lowers the squared error by at most this
+            fraction (values the data cannot tell apart let the steps stay long).
         solver: SolverOptions for every sample.
         progress: show a progress bar (the first step includes the compile).
         throw: raise ConvergenceError when the fit does not converge; with False check ``converged``.
@@ -217,7 +219,7 @@ def calibrate_rig(
         bar.set_postfix_str(f"tip rms {1e3 * history[-1]:.3f} mm, step {np.abs(step).max():.1e}")
 
     x0 = _coordinates(initial.values(), params)
-    fit = levenberg_marquardt(evaluate, x0, lower=lo, upper=hi, max_steps=max_steps, xtol=xtol, callback=report)
+    fit = levenberg_marquardt(evaluate, x0, lower=lo, upper=hi, max_steps=max_steps, xtol=xtol, ftol=ftol, callback=report)
     bar.close()
     values = {p: float(v) for p, v in _values(fit.x, params).items()}
     _, se_x, correlation, s2 = covariance(fit, measured.size)

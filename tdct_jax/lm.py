@@ -37,6 +37,7 @@ def levenberg_marquardt(
     upper=None,
     max_steps: int = 30,
     xtol: float = 1e-8,
+    ftol: float = 0.0,
     callback: Callable | None = None,
 ) -> LeastSquares:
     """Minimises |r(x)|^2 by Levenberg-Marquardt with Marquardt's diagonal scaling.
@@ -49,10 +50,13 @@ def levenberg_marquardt(
         max_steps: most trial steps.
         xtol: converged when the undamped Gauss-Newton step, kept within the bounds, moves no
             component more than this.
+        ftol: converged, too, when an accepted step lowers the cost by at most this fraction
+            (a flat valley of values the data cannot tell apart, where steps stay long).
         callback: called as callback(iteration, r, step) after each accepted step.
 
-    A trial is accepted when the model converged there and the cost fell; the damping then
-    shrinks tenfold (towards Gauss-Newton), otherwise it grows tenfold. Bounds: a component at a
+    A trial is accepted when the model converged there, the residual and Jacobian are finite and
+    the cost fell; the damping then shrinks tenfold (towards Gauss-Newton), otherwise it grows
+    tenfold. Bounds: a component at a
     bound whose descent direction leaves the box is held there for the step; the others' step is
     cut back to the box (a projected Levenberg-Marquardt step).
 
@@ -71,6 +75,10 @@ def levenberg_marquardt(
     r, J, code, aux = evaluate(x)
     if code != status.SUCCESS:
         return LeastSquares(x, r, J, aux, 0, code, "the model did not converge at the starting values")
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
+        return LeastSquares(
+            x, r, J, aux, 0, status.NONFINITE, "the residual or its Jacobian is not finite at the starting values"
+        )
     mu = 1e-3
     for it in range(max_steps):
         g = J.T @ r
@@ -85,24 +93,34 @@ def levenberg_marquardt(
         step[free] = np.linalg.solve(A + mu * np.diag(np.maximum(np.diag(A), 1e-300)), -g[free])
         step = np.clip(x + step, lo, hi) - x
         r_t, J_t, code_t, aux_t = evaluate(x + step)
-        if code_t == status.SUCCESS and np.all(np.isfinite(r_t)) and r_t @ r_t < r @ r:
+        finite = np.all(np.isfinite(r_t)) and np.all(np.isfinite(J_t))
+        if code_t == status.SUCCESS and finite and r_t @ r_t < r @ r:
+            flat = r @ r - r_t @ r_t <= ftol * (r @ r)
             x, r, J, aux = x + step, r_t, J_t, aux_t
             mu = max(mu / 10, 1e-12)
             if callback is not None:
                 callback(it + 1, r, step)
+            if flat:
+                return LeastSquares(x, r, J, aux, it + 1, status.SUCCESS, "converged (the cost no longer falls)")
         else:
             mu *= 10
     message = f"hit max_steps = {max_steps}; raise it or start nearer the optimum"
     return LeastSquares(x, r, J, aux, max_steps, status.OUTER_LIMIT, message)
 
 
-def covariance(fit: LeastSquares, n_data: int):
+def covariance(fit: LeastSquares, n_data: int, rcond: float = 1e-10):
     """The Gauss-Newton covariance s^2 (J^T J)^+ of the fitted x, with s^2 = |r|^2 / (n_data - p)
     the residual variance per datum; (covariance (p, p), standard errors (p,), correlation
-    matrix (p, p), s^2)."""
+    matrix (p, p), s^2). The pseudo-inverse comes from the SVD of J with its columns scaled to
+    unit length, singular values below ``rcond`` times the largest dropped: positive
+    semi-definite, so correlations stay within [-1, 1] where the data cannot tell values apart."""
     p = fit.x.size
     s2 = float(fit.residual @ fit.residual) / max(n_data - p, 1)
-    cov = s2 * np.linalg.pinv(fit.jacobian.T @ fit.jacobian)
+    norms = np.linalg.norm(fit.jacobian, axis=0)
+    norms = np.where(norms > 0, norms, 1.0)
+    _, sv, vt = np.linalg.svd(fit.jacobian / norms, full_matrices=False)
+    keep = sv > rcond * sv[0]
+    cov = s2 * (vt[keep].T / sv[keep] ** 2) @ vt[keep] / np.outer(norms, norms)
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(se, se)

@@ -45,9 +45,6 @@ from .tree import pytree, set_fields
 
 RAMP = 8
 """Sub-steps of the actuation ramp from the last converged sample when a warm start fails."""
-QUICK_ITER = 12
-"""Newton's step limit, in one load stage, for a solve warm-started from a neighbouring solution
-(``quick``): such a solve takes 2-5 steps, and a lane that fails fails fast."""
 _VECTORS = {"pretension": None, "rotation": 3, "translation": 3}
 _SCALARS = ("scale", "gravity_azimuth", "gravity_elevation", "g")
 _LINEAR = ("pretension", "rotation", "translation", "gravity_azimuth", "gravity_elevation")
@@ -262,11 +259,6 @@ def solve_sample(rig: Rig, servo, guess, solver: SolverOptions = DEFAULT_SOLVER)
     F_c = force_scale(*problem)
     tip = shoot(*problem, solver, x, F_c)[1]
     return rig.to_measured(tip.p), unscaled(robot, x, F_c), info.result.astype(jnp.int32)
-
-
-def quick(solver: SolverOptions) -> SolverOptions:
-    """The solver for warm starts: at most ``QUICK_ITER`` Newton steps and no load continuation."""
-    return dataclasses.replace(solver, max_iter=min(solver.max_iter, QUICK_ITER), stages=(1,))
 
 
 def _along(rig: Rig, servos, solver: SolverOptions):

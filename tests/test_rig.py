@@ -25,7 +25,9 @@ N = 24
 """Samples per recording in this file (one compiled program per sample count)."""
 PARAMS = (
     "sections[*].E",
-    "tendons[*].stiffness",
+    "tendons[0-2].stiffness",
+    "tendons[3-5].stiffness",
+    "tendons[6-8].stiffness",
     "pretension[0-2]",
     "pretension[3-5]",
     "pretension[6-8]",
@@ -40,7 +42,9 @@ PARAMS = (
 )
 TRUTH = {
     "sections[*].E": 45e9,
-    "tendons[*].stiffness": 330.0,
+    "tendons[0-2].stiffness": 220.0,
+    "tendons[3-5].stiffness": 420.0,
+    "tendons[6-8].stiffness": 500.0,
     "pretension[0-2]": 6.0,
     "pretension[3-5]": 2.5,
     "pretension[6-8]": 4.0,
@@ -64,13 +68,13 @@ def lab():
 
 @pytest.fixture(scope="module")
 def servos(lab):
-    """A path that bends each segment toward a turning direction, pulling the tendons on that side
-    and releasing the others (servo readings [m], (N, 9))."""
-    phi = np.linspace(0.0, 2 * np.pi, N, endpoint=False)
-    angles = np.array([float(t.angle) for t in lab.robot.tendons])
-    amplitude = np.repeat([1.5e-3, 1.0e-3, 0.8e-3], 3) * (0.5 + 0.5 * np.sin(np.linspace(0, np.pi, N)))[:, None]
-    order = np.array([1.0, -1.0, 0.5])[np.repeat(np.arange(3), 3)]
-    return amplitude * np.cos(order * phi[:, None] - angles[None, :])
+    """Each segment bent toward its own direction by its own amount (up to 3 mm of servo travel,
+    pulling the tendons on that side and releasing the others), drawn at random per sample
+    (servo readings [m], (N, 9))."""
+    rng = np.random.default_rng(7)
+    phi, amplitude = rng.uniform(0, 2 * np.pi, (N, 3)), rng.uniform(0, 3e-3, (N, 3))
+    angles = np.array([float(t.angle) for t in lab.robot.tendons]).reshape(3, 3)
+    return (amplitude[:, :, None] * np.cos(phi[:, :, None] - angles[None])).reshape(N, 9)
 
 
 def test_rotation_vector_closed_form():
