@@ -19,7 +19,7 @@ from .evaluation import evaluate
 from .objectives import objective_value
 from .optimise import optimise
 from .problem import IKResult, Plan, Problem, _wrench, actuation_of, pose_errors
-from .reach import Model, Reach, _usable, _where, no_model, reach_augmented, reach_nested
+from .reach import Model, Reach, _lazily, _usable, _where, no_model, reach_augmented, reach_nested
 from .starts import STARTS, nearest_on_grid, starts
 
 
@@ -49,12 +49,6 @@ class Tried(NamedTuple):
     x: jax.Array
     info: RootInfo
     i: jax.Array  # passes so far
-
-
-def _lazily(needed, f, otherwise):
-    """f() where ``needed``, else ``otherwise``: a while loop of at most one pass rather than
-    ``lax.cond``, so that under ``vmap`` f runs only when some lane needs it."""
-    return lax.while_loop(lambda c: c[0], lambda c: (jnp.zeros_like(c[0]), f()), (needed, otherwise))[1]
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(5,))
