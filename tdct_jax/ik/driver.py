@@ -74,7 +74,7 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
         ends = OPTIMISE if plan.objective is not None else CLOSE
         return jnp.where(more, REACH, jnp.where(best.code == status.SUCCESS, ends, CLOSE))
 
-    def body(c):
+    def step(c):
         phase, k, best = c.phase, c.k, c.best
         reaching = phase == REACH
         grid = _lazily(reaching & (k == 1), lambda: nearest_on_grid(prob, plan), v0)
@@ -98,7 +98,7 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
 
         best, steps = _lazily(reaching, reached, (best, c.steps))
         k = jnp.where(reaching, k + 1, k)
-        phase = jnp.where(reaching, after_reach(k, best), jnp.where(phase >= CLOSE, DONE, CLOSE if closing else DONE))
+        phase = jnp.where(reaching, after_reach(k, best), jnp.where(phase == CLOSE, DONE, CLOSE if closing else DONE))
         if plan.objective is not None:
             o = _lazily(c.phase == OPTIMISE, lambda: optimise(best.v, best.wrench, prob, plan), best._replace(model=None))
             use = (c.phase == OPTIMISE) & (best.code == status.SUCCESS)
@@ -106,7 +106,10 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
             steps = jnp.where(use, steps + o.steps, steps)
         if not closing:
             phase = jnp.where(phase == CLOSE, DONE, phase)
-        return Tried(phase, k, best, steps, x, info, c.i + 1)
+        return Tried(phase, k, best, steps, x, info, c.i)
+
+    def body(c):  # a pass once DONE costs one test
+        return _lazily(c.phase != DONE, lambda: step(c), c)._replace(i=c.i + 1)
 
     n = jnp.shape(wrench0)[0]
     none = Reach(v0, jnp.full(n, jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT), cold)
