@@ -159,7 +159,7 @@ def test_calibration_recovers_known_values(lab, truth, servos):
     and the registration, which may be zero, within 1e-4 rad and 0.01 mm). With 1 mm noise the
     truth lies within 3 standard errors of every estimate."""
     exact = synthesize_recording(truth, servos)
-    fit = calibrate_rig(lab, exact, PARAMS, progress=False, xtol=1e-9)
+    fit = calibrate_rig(lab, exact, PARAMS, progress=False)
     for p in PARAMS:
         if p.startswith(("tendons[0].angle", "tendons[4]", "tendons[8]", "rotation")):
             assert abs(fit.values[p] - TRUTH[p]) < 1e-4, p
@@ -207,7 +207,7 @@ def test_cli_calibrates_a_slice_end_to_end(tmp_path, capsys):
     assert rigs.value(fitted, "pretension[0-2]") == pytest.approx(fit["values"]["pretension[0-2]"], rel=1e-12)
     data = read_dataset(tmp_path / "dataset.toml")
     again = predict(fitted, data.validation)
-    assert again.errors["rmse"] * 1e3 == pytest.approx(report["validation"]["errors_mm"]["rmse"], rel=1e-6)
+    assert again.errors["rmse"] * 1e3 == pytest.approx(report["validation"]["errors_mm"]["rmse"], abs=1e-4)  # mm, 4 decimals
     assert (out / "prediction.png").stat().st_size > 10_000
 
 
