@@ -84,7 +84,7 @@ def main() -> None:
         after,
         fit,
         results / "ftdcr_prediction.png",
-        title=f"ftdcr-v4: val.csv predicted from a fit on train.csv (every {args.every}th sample)",
+        title=f"ftdcr-v4: val.csv predicted from a fit on train.csv (1 sample in {args.every})",
         floor=5e-3,
     )
     write_result(
