@@ -6,8 +6,8 @@ direction) is fitted by Levenberg-Marquardt with bounds on the tip residuals, mo
 measured in the measurement frame, with the Jacobian exact: forward-mode autodiff through the
 implicitly differentiated displacement-driven solve of every sample. The first step solves along
 the recorded sequence (``rig.along``); every later one starts each sample from its solution at the
-step before, side by side (Newton with its load continuation), and a trial where some sample still
-fails counts as a failed step (Levenberg-Marquardt then takes a shorter one).
+step before, side by side (Newton without a load ramp), and a trial where some sample fails
+counts as a failed step (Levenberg-Marquardt then takes a shorter one).
 """
 
 from __future__ import annotations
@@ -52,7 +52,10 @@ def _fit_step(x, rig, servos, guesses, measured, params, solver):
     """Tip residuals (3 n,) [m], their exact Jacobian in x, the unknowns found and status codes."""
 
     def residual(x):
-        tip, unknowns, code = rigs._batch(rigs.replace(rig, _values(x, params)), servos, guesses, solver)
+        # warm starts need no load ramp from zero, and under vmap one failing sample would make
+        # every sample run all of its stages
+        warm = dataclasses.replace(solver, stages=(1,))
+        tip, unknowns, code = rigs._batch(rigs.replace(rig, _values(x, params)), servos, guesses, warm)
         r = (tip - measured).ravel()
         return r, (r, unknowns, code)
 
