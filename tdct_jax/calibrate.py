@@ -25,7 +25,7 @@ from .checks import check_integer
 from .data import Experiment, stack
 from .description import GeneralRobot
 from .inputs import GeneralActuation, Loads
-from .lm import levenberg_marquardt
+from .lm import covariance, levenberg_marquardt
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .mechanics import check_params, shape_errors
 from .options import DEFAULT_SOLVER, SolverOptions
@@ -248,17 +248,14 @@ def calibrate(
     before = first[0]
 
     values = {p: float(v) for p, v in _values(fit.x, params).items()}
-    m = 3 * int(np.count_nonzero(np.asarray(batch.weight)))
-    s2 = float(fit.residual @ fit.residual) / max(m - len(params), 1)
-    cov = s2 * np.linalg.pinv(fit.jacobian.T @ fit.jacobian)
-    se_x = np.sqrt(np.diag(cov))
+    _, se_x, correlation, s2 = covariance(fit, 3 * int(np.count_nonzero(np.asarray(batch.weight))))
     scale = np.array([1.0 if fields.is_linear(p) else values[p] for p in params])
     result = Calibration(
         params=params,
         initial=initial,
         values=values,
         std_errors={p: float(scale[i] * se_x[i]) for i, p in enumerate(params)},
-        correlation=cov / np.outer(se_x, se_x),
+        correlation=correlation,
         robot=fields.replace(robot, values),
         names=tuple(e.name for e in experiments),
         rmse_before=before[0],

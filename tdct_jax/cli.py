@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -320,9 +321,25 @@ def _parser() -> argparse.ArgumentParser:
     )
     i.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     i.add_argument("--plot", metavar="ik.png", help="save a side view and a 3D view of the shape with the target")
-    k = verbs.add_parser("calibrate", parents=[described], help="fit Robot fields to measured shape files (Sec. III.B)")
-    k.add_argument("files", nargs="+", metavar="FILE", help="shape files (CSV, see tdct_jax.data) or folders of them")
-    k.add_argument("--params", default="E_silicone", help="comma-separated Robot fields to fit (default E_silicone)")
+    k = verbs.add_parser(
+        "calibrate",
+        parents=[described],
+        help="fit Robot fields to measured shape files (Sec. III.B), or a robot on its rig to a recording (--dataset)",
+    )
+    k.add_argument("files", nargs="*", metavar="FILE", help="shape files (CSV, see tdct_jax.data) or folders of them")
+    k.add_argument(
+        "--dataset",
+        metavar="dataset.toml",
+        help="a recording's description (docs/recordings.md): fit its train file, predict its validation file; "
+        "--robot (default: the dataset's robot file) gives the robot and its [rig] table",
+    )
+    k.add_argument(
+        "--params",
+        help="comma-separated fields to fit (default E_silicone; with --dataset "
+        "sections[*].E, scale, rotation[0-1], translation[0-2]; names: docs/recordings.md)",
+    )
+    k.add_argument("--every", type=int, default=1, help="with --dataset: fit every Nth training sample (default 1: all)")
+    k.add_argument("--out", metavar="DIR", help="with --dataset: write fitted.toml, report.json and prediction.png into DIR")
     k.add_argument("--max-steps", type=int, default=30, help="most Levenberg-Marquardt steps (default 30)")
     k.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     k.add_argument("--plot", metavar="fit.png", help="save model over measured shapes (side view and 3D)")
@@ -610,11 +627,15 @@ def _calibrate_command(args) -> int:
     from .calibrate import calibrate
     from .data import read_experiments
 
+    check_flag("--max-steps", args.max_steps, 1)
+    if args.dataset:
+        return _calibrate_rig_command(args)
+    if not args.files or args.out or args.every != 1:
+        raise ValueError("tdct calibrate takes shape files (FILE ...), or --dataset with --out and --every")
     robot = _robot(args)
     solver = _solver(args)
-    check_flag("--max-steps", args.max_steps, 1)
     experiments = read_experiments(args.files, robot)
-    params = tuple(p.strip() for p in args.params.split(",") if p.strip())
+    params = _names(args.params or "E_silicone")
     options = dict(gravity=_gravity(args), solver=solver)
     fit = calibrate(robot, experiments, params, max_steps=args.max_steps, progress=not args.quiet, throw=False, **options)
     print(json.dumps(fit.to_dict()) if args.json else fit.summary())
@@ -628,6 +649,60 @@ def _calibrate_command(args) -> int:
         advice = f"hit --max-steps {args.max_steps}; raise it, or start nearer the optimum (--set)"
         message = advice if fit.result == status.OUTER_LIMIT else fit.message
         raise ConvergenceError(f"calibration did not converge: {message}", fit.result)
+    return 0
+
+
+def _names(text: str) -> tuple:
+    return tuple(p.strip() for p in text.split(",") if p.strip())
+
+
+def _calibrate_rig_command(args) -> int:
+    """``tdct calibrate --dataset``: the rig fitted to the train file, the validation file predicted."""
+    from .calibrate_rig import RIG_PARAMS, RIG_SOLVER, calibrate_rig, predict
+    from .plotting import plot_prediction
+    from .recording import read_dataset
+    from .rig import Rig
+
+    if args.files:
+        raise ValueError("tdct calibrate --dataset takes no shape files")
+    check_flag("--every", args.every, 1)
+    data = read_dataset(args.dataset)
+    robot_file = args.robot or data.robot
+    if robot_file is None:
+        raise ValueError(f"{data.description}: names no robot file; give one with --robot")
+    rig = Rig.from_toml(robot_file)
+    solver = dataclasses.replace(RIG_SOLVER, max_iter=args.max_iter)
+    params = _names(args.params) if args.params else RIG_PARAMS
+    out = Path(args.out) if args.out else None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    train = data.train.subset(slice(None, None, args.every))
+    fit = calibrate_rig(rig, train, params, max_steps=args.max_steps, solver=solver, progress=not args.quiet, throw=False)
+    report = {"dataset": str(data.description), "robot": str(robot_file), "train_samples": len(train), "fit": fit.to_dict()}
+    prediction = None
+    if data.validation is not None:
+        prediction = predict(fit.rig, data.validation, solver=solver)
+        report["validation"] = prediction.to_dict()
+    if out is not None:
+        (out / "fitted.toml").write_text(fit.rig.to_toml())
+        (out / "report.json").write_text(json.dumps(report, indent=1))
+        if prediction is not None:
+            plot_prediction(prediction, fit, out / "prediction.png", title=f"{data.validation.name} predicted from {train.name}")
+    if args.json:
+        print(json.dumps(report))
+    else:
+        print(fit.summary())
+        if prediction is not None:
+            e = prediction.errors
+            print(
+                f"\nvalidation {data.validation.name} ({e['n']} samples), mean offset removed: RMSE {1e3 * e['rmse']:.2f} mm, "
+                f"median {1e3 * e['median']:.2f} mm, 95th percentile {1e3 * e['p95']:.2f} mm; "
+                f"{1e3 * prediction.seconds_per_pose:.1f} ms per pose"
+            )
+    if not fit.converged:
+        raise ConvergenceError(f"calibration did not converge: {fit.message}; its best values are kept", fit.result)
+    if prediction is not None and np.any(prediction.codes):
+        raise ConvergenceError(f"{int(np.count_nonzero(prediction.codes))} validation samples did not solve", 1)
     return 0
 
 

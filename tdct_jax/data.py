@@ -250,13 +250,13 @@ def _at(path: Path, line: int):
         raise _error(path, line, str(e)) from e
 
 
-def _read_text(path: Path) -> str:
+def _read_text(path: Path, what: str = "shape file") -> str:
     try:
         return path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as e:
-        raise _error(path, 0, f"cannot read shape file: not UTF-8 text ({e.reason} at byte {e.start}); save it as UTF-8") from e
+        raise _error(path, 0, f"cannot read {what}: not UTF-8 text ({e.reason} at byte {e.start}); save it as UTF-8") from e
     except OSError as e:
-        raise _error(path, 0, f"cannot read shape file: {e}") from e
+        raise _error(path, 0, f"cannot read {what}: {e}") from e
 
 
 def _parse(path: Path, text: str):

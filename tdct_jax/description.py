@@ -13,6 +13,7 @@ with a numeric ``end`` does, at that (traced, differentiable) arc length.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -278,7 +279,8 @@ class GeneralRobot:
     @classmethod
     def from_dict(cls, data: dict) -> GeneralRobot:
         """A robot from the parsed robot file (the TOML's tables as dicts); see ``from_toml``."""
-        _keys("the file", data, required=("length", "sections"), optional=("tendons", "tubes", "masses"))
+        # a [rig] table (how the robot sits on its test rig) is read by ``rig.Rig.from_toml``
+        _keys("the file", data, required=("length", "sections"), optional=("tendons", "tubes", "masses", "rig"))
         length = data["length"]
         sections, previous = [], 0.0
         for i, raw in enumerate(_tables("sections", data)):
@@ -313,6 +315,29 @@ class GeneralRobot:
             _keys(f"masses[{i}]", raw, required=("s", "mass"))
             masses.append(_build(PointMass, f"masses[{i}]", raw))
         return cls(length, tuple(sections), tuple(tendons), tuple(tubes), tuple(masses))
+
+    def to_toml(self) -> str:
+        """The robot as a robot file's text (``from_toml`` reads it back, angles to the round-off of
+        their conversion to degrees)."""
+        lines = [f"length = {float(self.length)!r}"]
+        for kind, table in (
+            ("sections", self.sections),
+            ("tendons", self.tendons),
+            ("tubes", self.tubes),
+            ("masses", self.masses),
+        ):
+            for item in table:
+                lines += ["", f"[[{kind}]]"]
+                for f in dataclasses.fields(item):
+                    v = getattr(item, f.name)
+                    if v is None:
+                        continue
+                    if kind == "tendons" and f.name in ("angle", "twist"):
+                        name = "angle_deg" if f.name == "angle" else "twist_deg_per_m"
+                        lines.append(f"{name} = {math.degrees(float(v))!r}")
+                    else:
+                        lines.append(f"{f.name} = {float(v)!r}")
+        return "\n".join(lines) + "\n"
 
     # ---- derived quantities -------------------------------------------------------------------
 

@@ -4,7 +4,8 @@ The paper's ``Robot`` names its scalar fields (``robot.SCALAR_FIELDS``: "E_silic
 "tendon_offset", ...). A ``GeneralRobot`` names ``length`` and the fields of its items by position,
 ``sections[1].E``, ``tendons[0].offset``, ``tubes[0].E``, ``masses[2].mass``; ``[*]`` stands for
 every item of its kind with one shared value (``sections[*].E``: one modulus for the whole body,
-``tendons[*].stiffness``: one EA for every tendon). SI units: tendon angles and twists in rad.
+``tendons[*].stiffness``: one EA for every tendon), ``[a-b]`` for items a to b (``tendons[0-2].stiffness``:
+one EA for a segment's three tendons). SI units: tendon angles and twists in rad.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ ITEMS = {"sections": Section, "tendons": Tendon, "tubes": Tube, "masses": PointM
 """The item kinds of a GeneralRobot and their classes (every dataclass field is a scalar field)."""
 LINEAR = ("nu", "angle", "twist", "nu_silicone", "nu_tube")
 """Field names whose values may be zero or negative; every other field is positive."""
-_NAME = re.compile(r"^(\w+)\[(\d+|\*)\]\.(\w+)$")
+_NAME = re.compile(r"^(\w+)\[(\d+|\*|\d+-\d+)\]\.(\w+)$")
 
 
 def names(robot: Robot | GeneralRobot) -> tuple[str, ...]:
@@ -43,14 +44,15 @@ def _parse(robot: Robot | GeneralRobot, name: str) -> tuple[str, tuple[int, ...]
         n = len(getattr(robot, m[1]))
         if m[2] == "*" and n:
             return m[1], tuple(range(n)), m[3]
-        if m[2] != "*" and int(m[2]) < n:
-            return m[1], (int(m[2]),), m[3]
-        raise ValueError(f"{name!r}: the robot has {n} {m[1]} (indices 0 to {n - 1})")
+        lo, _, hi = m[2].partition("-")
+        if m[2] != "*" and int(lo) <= int(hi or lo) < n:
+            return m[1], tuple(range(int(lo), int(hi or lo) + 1)), m[3]
+        raise ValueError(f"{name!r}: the robot has {n} {m[1]} (indices 0 to {n - 1}, or a range a-b with a <= b)")
     kind = "Robot" if isinstance(robot, Robot) else "GeneralRobot"
     if isinstance(robot, Robot):
         allowed = ", ".join(SCALAR_FIELDS)
     else:
-        items = (f"{k}[i or *].{{{', '.join(f.name for f in dataclasses.fields(c))}}}" for k, c in ITEMS.items())
+        items = (f"{k}[i, * or a-b].{{{', '.join(f.name for f in dataclasses.fields(c))}}}" for k, c in ITEMS.items())
         allowed = ", ".join(["length", *items])
     raise ValueError(f"{name!r} is not a scalar {kind} field; allowed: {allowed}")
 

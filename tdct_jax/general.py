@@ -449,7 +449,8 @@ def check_arguments(robot: GeneralRobot, act: GeneralActuation, load: Loads, sol
         if t.max_tension is not None and is_concrete(act.tensions) and is_concrete(t.max_tension):
             check_range(f"tensions[{i}]", act.tensions[i], 0.0, float(t.max_tension), unit=f" N (tendons[{i}].max_tension)")
     if act.driven and is_concrete_tree(robot):
-        reach = np.asarray(rest_lengths(robot))
+        with jax.ensure_compile_time_eval():  # under jit, jnp on constants would be traced
+            reach = np.asarray(rest_lengths(robot))
         for k, i in enumerate(act.driven):
             check_range(
                 f"displacements[{k}] (tendons[{i}])",

@@ -585,3 +585,53 @@ def plot_stiffness_map(stiffness, path: str | Path | None = None):
     fig.colorbar(im, ax=[ax, bx], label="insertion the stiffest solution chooses [mm]", pad=0.02)
     fig.suptitle("Tendons 1 and 3 with the tube, in-plane targets: what the redundant input buys in stiffness")
     return _finish(fig, path)
+
+
+@_styled
+def plot_prediction(prediction, calibration=None, path: str | Path | None = None, title: str | None = None, floor=None):
+    """A held-out recording predicted (``calibrate_rig.predict``): per motion-pattern family, the
+    measured tip path (dots) and the model's (line) seen along the measurement frame's z (x-y, mm);
+    below, the error along the sequence (mean offset removed), and with ``calibration`` the tip
+    RMSE after each fit step. ``floor``: a repeatability floor [m] drawn as a line."""
+    plt = _pyplot()
+    families = list(prediction.per_pattern)
+    fig = plt.figure(figsize=(4.2 * max(len(families), 2), 8.2))
+    grid = fig.add_gridspec(2, max(len(families), 2) * 2)
+    fam = np.array([p.rpartition("_dir")[0] if p.rpartition("_dir")[2].isdigit() else p for p in prediction.patterns])
+    tips, measured = 1e3 * (prediction.tips + prediction.errors["offset"]), 1e3 * prediction.measured
+    for k, f in enumerate(families):
+        ax = fig.add_subplot(grid[0, 2 * k : 2 * k + 2])
+        pats = list(dict.fromkeys(prediction.patterns[fam == f]))
+        colors = plt.cm.viridis(np.linspace(0.0, 0.9, len(pats)))
+        for p, c in zip(pats, colors, strict=True):
+            m = prediction.patterns == p
+            ax.plot(measured[m, 0], measured[m, 1], "o", ms=2.5, color=c, alpha=0.6)
+            ax.plot(tips[m, 0], tips[m, 1], "-", lw=1.4, color=c, label=p)
+        e = prediction.per_pattern[f]
+        ax.set_title(f"{f}: RMSE {1e3 * e['rmse']:.1f} mm, median {1e3 * e['median']:.1f} mm", fontsize=10)
+        ax.set_xlabel("tip x [mm]")
+        ax.set_ylabel("tip y [mm]")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.legend(fontsize=6, loc="best")
+    wide = 2 * max(len(families), 2) - (2 if calibration is not None else 0)
+    ax = fig.add_subplot(grid[1, :wide])
+    err = np.linalg.norm(tips - measured, axis=1)
+    ax.plot(err, lw=1.0, color="C0", label=f"model (RMSE {1e3 * prediction.errors['rmse']:.2f} mm)")
+    if floor is not None:
+        ax.axhline(1e3 * floor, color="C3", ls="--", lw=1.0, label=f"repeatability floor {1e3 * floor:.1f} mm")
+    starts = np.flatnonzero(np.r_[True, fam[1:] != fam[:-1]])
+    for s in starts:
+        ax.axvline(s, color="0.6", lw=0.6)
+        ax.text(s, ax.get_ylim()[1], f" {fam[s]}", fontsize=7, va="top")
+    ax.set_xlabel("sample")
+    ax.set_ylabel("tip error [mm]")
+    ax.legend(fontsize=8, loc="upper right")
+    if calibration is not None:
+        ax = fig.add_subplot(grid[1, wide:])
+        ax.plot(1e3 * np.asarray(calibration.history), "o-", ms=3)
+        ax.set_xlabel("fit step")
+        ax.set_ylabel("training tip RMSE [mm]")
+        ax.set_title(f"fit of {len(calibration.params)} values", fontsize=10)
+    if title:
+        fig.suptitle(title)
+    return _finish(fig, path)

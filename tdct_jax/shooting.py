@@ -227,9 +227,34 @@ def _root_jvp(primals, tangents):
     """Implicit differentiation: dx = -J^-1 (d residual / d inputs) d inputs, with Newton's J."""
     robot, act, load, gravity, guess, solver = primals
     x, info = _root(*primals)
-    J = jacobian_at_root(robot, act, load, gravity, solver, x, info.jacobians[0])
-    _, dF = jax.jvp(lambda r, a, l, g: residual(r, a, l, g, solver, x), primals[:4], tangents[:4])
-    return (x, info), (-jnp.linalg.solve(J, dF), jax.tree.map(zero_tangent, info))
+    dx = _implicit(robot, act, load, gravity, solver, x, info.jacobians[0], tangents[:4])
+    return (x, info), (dx, jax.tree.map(zero_tangent, info))
+
+
+def _implicit(robot, act, load, gravity, solver, x, J, tangents):
+    """The tangent of the root x (Newton's d residual / dx there: J) for the inputs' tangents."""
+    J = jacobian_at_root(robot, act, load, gravity, solver, x, J)
+    _, dF = jax.jvp(lambda r, a, l, g: residual(r, a, l, g, solver, x), (robot, act, load, gravity), tangents)
+    return -jnp.linalg.solve(J, dF)
+
+
+@jax.custom_jvp
+def at_root(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x, J):
+    """x, a root that ``root`` found elsewhere (its RootInfo's d residual / dx: J), with ``root``'s
+    implicit derivatives in the inputs: a root found inside another loop is differentiable."""
+    return x
+
+
+@at_root.defjvp
+def _at_root_jvp(primals, tangents):
+    robot, act, load, gravity, solver, x, J = primals
+    return x, _implicit(robot, act, load, gravity, solver, x, J, tangents[:4])
+
+
+def unset_info(n: int) -> RootInfo:
+    """A RootInfo of zeros for n unknowns, shaped like ``root``'s (a loop's state before a root)."""
+    zero = jnp.zeros((), jnp.int32)
+    return RootInfo(zero, zero, zero, (jnp.zeros((n, n)), (jnp.zeros((3, n)), jnp.zeros((3, 3, n)))))
 
 
 def zero_tangent(x):

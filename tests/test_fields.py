@@ -32,12 +32,24 @@ def test_traced_values_pass_through(two):
     assert float(fields.replace(tdct.Robot(), {"E_silicone": 1e5}).E_silicone) == 1e5
 
 
+def test_a_range_shares_one_value_among_its_items(two):
+    robot = fields.replace(two, {"tendons[1-3].offset": 0.012})
+    assert [float(t.offset) for t in robot.tendons] == [0.010, 0.012, 0.012, 0.012, 0.010, 0.010]
+    assert fields.value(robot, "tendons[1-3].offset") == 0.012
+    with pytest.raises(ValueError, match="values differ"):
+        fields.value(robot, "tendons[0-1].offset")
+    with pytest.raises(ValueError, match=re.escape("6 tendons (indices 0 to 5, or a range a-b with a <= b)")):
+        fields.check(two, "tendons[4-6].offset")
+    with pytest.raises(ValueError, match="a <= b"):
+        fields.check(two, "tendons[3-1].offset")
+
+
 @pytest.mark.parametrize(
     "name, words",
     [
-        ("sections[2].E", "2 sections (indices 0 to 1)"),
+        ("sections[2].E", "2 sections (indices 0 to 1, or a range a-b with a <= b)"),
         ("tendon[0].offset", "not a scalar GeneralRobot field"),
-        ("tendons[0].radius", "tendons[i or *].{offset, angle"),
+        ("tendons[0].radius", "tendons[i, * or a-b].{offset, angle"),
         ("E_silicone", "not a scalar GeneralRobot field"),
     ],
 )

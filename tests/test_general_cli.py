@@ -97,7 +97,10 @@ def test_plot_robot_draws_sections_tendons_masses_and_loads(two_segment):
             "--point-load 500:0,0,1: arc length 500 is outside the allowed range [0, 400] mm",
         ),
         ([*SOLVE, "--set", "sections[*].G=1"], "--set: 'sections[*].G' is not a scalar GeneralRobot field; allowed: length"),
-        ([*SOLVE, "--set", "tendons[6].offset=0.01"], "--set: 'tendons[6].offset': the robot has 6 tendons (indices 0 to 5)"),
+        (
+            [*SOLVE, "--set", "tendons[6].offset=0.01"],
+            "--set: 'tendons[6].offset': the robot has 6 tendons (indices 0 to 5, or a range a-b with a <= b)",
+        ),
         ([*SOLVE, "--displacements-mm", "1:200"], "tendon 1's 200 mm is outside the allowed range (-inf, 200) mm"),
         ([*SOLVE, "--displacements-mm", "7:1"], "--displacements-mm 7:1: tendon numbers, each once, 1 to 6"),
         ([*SOLVE, "--displacements-mm", "1"], "argument --displacements-mm: expected TENDON:MM pairs"),

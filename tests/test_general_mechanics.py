@@ -174,8 +174,8 @@ def test_actuation_jacobian_covers_tensions_displacements_and_insertions():
 @pytest.mark.parametrize(
     "params, words",
     [
-        (("sections[*].G",), ["params: 'sections[*].G' is not a scalar GeneralRobot field", "sections[i or *]"]),
-        (("tendons[6].offset",), ["'tendons[6].offset'", "6 tendons (indices 0 to 5)"]),
+        (("sections[*].G",), ["params: 'sections[*].G' is not a scalar GeneralRobot field", "sections[i, * or a-b]"]),
+        (("tendons[6].offset",), ["'tendons[6].offset'", "6 tendons (indices 0 to 5, or a range a-b"]),
         (("tendons[0].stiffness",), ["tendons[0].stiffness is not set (None)"]),
         (("E_silicone",), ["'E_silicone' is not a scalar GeneralRobot field"]),
     ],

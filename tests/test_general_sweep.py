@@ -101,7 +101,12 @@ def test_warm_started_displacement_sweep_equals_single_solves_and_returns_the_te
     "grid, act, load, message",
     [
         ({"insertion": [0.0]}, None, None, "cannot sweep 'insertion': not an input (tensions, insertions, displacements"),
-        ({"sections[2].E": [1e9]}, None, None, "'sections[2].E': the robot has 2 sections (indices 0 to 1)"),
+        (
+            {"sections[2].E": [1e9]},
+            None,
+            None,
+            "'sections[2].E': the robot has 2 sections (indices 0 to 1, or a range a-b with a <= b)",
+        ),
         ({"tendons[*].offsett": [0.01]}, None, None, "'tendons[*].offsett' is not a scalar GeneralRobot field"),
         (
             {"sections[*].E": [5e10, -1.0]},

@@ -13,13 +13,13 @@ from jax import lax
 
 from .. import status
 from ..inputs import GeneralActuation
-from ..shooting import force_scale, root, unscaled
-from ..solve import solution_and_compliance
+from ..shooting import RootInfo, at_root, force_scale, root, tip_compliance, unscaled, unset_info
+from ..solve import solution_and_compliance, solution_at
 from .evaluation import evaluate
 from .objectives import objective_value
 from .optimise import optimise
 from .problem import IKResult, Plan, Problem, _wrench, actuation_of, pose_errors
-from .reach import Model, Reach, _usable, _where, no_model, reach_augmented, reach_nested
+from .reach import Model, Reach, _lazily, _usable, _where, no_model, reach_augmented, reach_nested
 from .starts import STARTS, nearest_on_grid, starts
 
 
@@ -29,21 +29,26 @@ class Found(NamedTuple):
     steps: jax.Array
     code: jax.Array
     model: Model  # phase 1's last linearisation (``Model``; tip NaN)
+    x: jax.Array  # the closing forward solve at v: scaled unknowns (unset with multiple shooting)
+    info: RootInfo  # and its RootInfo
+
+
+REACH, OPTIMISE, CLOSE, DONE = range(4)
+"""``find``'s passes: phase 1 from one start, phase 2 (with an objective), the closing forward
+solve at the answer, and the end."""
 
 
 class Tried(NamedTuple):
-    """``find``'s loop over the starts: how many were tried, the best phase-1 end so far, the
-    steps taken over all of them."""
+    """``find``'s loop: its pass (REACH ...), how many starts were tried, the best end so far, the
+    steps taken over all of them, and the last forward solve (scaled unknowns, RootInfo)."""
 
+    phase: jax.Array
     k: jax.Array
     best: Reach
     steps: jax.Array
-
-
-def _lazily(needed, f, otherwise):
-    """f() where ``needed``, else ``otherwise``: a while loop of at most one pass rather than
-    ``lax.cond``, so that under ``vmap`` f runs only when some lane needs it."""
-    return lax.while_loop(lambda c: c[0], lambda c: (jnp.zeros_like(c[0]), f()), (needed, otherwise))[1]
+    x: jax.Array
+    info: RootInfo
+    i: jax.Array  # passes so far
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(5,))
@@ -51,50 +56,71 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
     """The IK solution in scaled inputs (see the module docstring), from v0 (and the converged or
     NaN base wrench there; with a usable ``model`` at v0, a warm update from it), then from the
     grid start (``nearest_on_grid``) and ``starts`` until one reaches (the nearest pose of them
-    all otherwise); its derivatives by implicit differentiation (``_find_jvp``)."""
+    all otherwise), then phase 2, then the forward solve at the answer: one loop whose passes
+    share one forward solve in the compiled program. Its derivatives by implicit
+    differentiation (``_find_jvp``)."""
     candidates = starts(v0, prob, plan)
     cold = no_model(prob, plan)
     warm = _usable(model)
+    closing = prob.solver.intervals == 1  # multiple shooting: ``_solve_ik`` solves at the answer itself
 
     def reach(v, wrench, first):
         if plan.method == "nested":
             return reach_nested(v, wrench, prob, plan)._replace(model=cold)
         return reach_augmented(v, wrench, prob, plan, _where(first, model, cold))
 
-    def cond(c):
-        return (c.k < n_starts) & (c.best.code != status.SUCCESS)
+    def after_reach(k, best):
+        more = (k < n_starts) & (best.code != status.SUCCESS)
+        ends = OPTIMISE if plan.objective is not None else CLOSE
+        return jnp.where(more, REACH, jnp.where(best.code == status.SUCCESS, ends, CLOSE))
 
-    def body(c):
-        k, best, steps = c
-        grid = _lazily(cond(c) & (k == 1), lambda: nearest_on_grid(prob, plan), v0)
-        v = jnp.where(k == 1, grid, candidates[jnp.maximum(k - 1, 0)])
-        guess = jnp.where(k == 0, wrench0, jnp.nan)
+    def step(c):
+        phase, k, best = c.phase, c.k, c.best
+        reaching = phase == REACH
+        grid = _lazily(reaching & (k == 1), lambda: nearest_on_grid(prob, plan), v0)
+        v = jnp.where(phase == CLOSE, best.v, jnp.where(k == 1, grid, candidates[jnp.clip(k - 1, 0, len(candidates) - 1)]))
+        guess = jnp.where(phase == CLOSE, best.wrench, jnp.where(k == 0, wrench0, jnp.nan))
         problem = (prob.robot, actuation_of(v, prob, plan), prob.load, prob.gravity)
-
-        def solved():
-            x, info = root(*problem, guess, prob.solver)
-            return unscaled(prob.robot, x, force_scale(*problem)), info.result.astype(jnp.int32)
-
         # a warm update's wrench0 is the converged solve at v0
-        wrench, code = lax.cond(warm & (k == 0), lambda: (wrench0, jnp.int32(status.SUCCESS)), solved)
-        r = reach(v, wrench, k == 0)
-        r = r._replace(code=jnp.where(code == status.SUCCESS, r.code, code))
-        rank, best_rank = (
-            jnp.where(x.code == status.SUCCESS, 0, jnp.where(x.code == status.UNREACHABLE, 1, 2)) for x in (r, best)
-        )
-        closer = (rank < best_rank) | ((rank == best_rank) & (r.e @ r.e < best.e @ best.e))
-        return Tried(k + 1, jax.tree.map(lambda a, b: jnp.where(closer, a, b), r, best), steps + r.steps)
+        skip = warm & (k == 0) & reaching
+        x, info = _lazily((reaching & ~skip) | (phase == CLOSE), lambda: root(*problem, guess, prob.solver), (c.x, c.info))
+        wrench = jnp.where(skip, wrench0, unscaled(prob.robot, x, force_scale(*problem)))
+        code = jnp.where(skip, status.SUCCESS, info.result).astype(jnp.int32)
 
-    none = Reach(
-        v0, jnp.full(jnp.shape(wrench0), jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT), cold
-    )
-    tried = lax.while_loop(cond, body, Tried(0, none, 0))
-    r = tried.best._replace(steps=tried.steps)
-    if plan.objective is not None:
-        o = optimise(r.v, r.wrench, prob, plan)
-        use = r.code == status.SUCCESS
-        r = jax.tree.map(lambda a, b: jnp.where(use, a, b), Reach(o.v, o.wrench, o.e, r.steps + o.steps, o.code, r.model), r)
-    return Found(r.v, r.wrench, r.steps, r.code, r.model)
+        def reached():
+            r = reach(v, wrench, k == 0)
+            r = r._replace(code=jnp.where(code == status.SUCCESS, r.code, code))
+            rank, best_rank = (
+                jnp.where(x.code == status.SUCCESS, 0, jnp.where(x.code == status.UNREACHABLE, 1, 2)) for x in (r, best)
+            )
+            closer = (rank < best_rank) | ((rank == best_rank) & (r.e @ r.e < best.e @ best.e))
+            return jax.tree.map(lambda a, b: jnp.where(closer, a, b), r, best), c.steps + r.steps
+
+        best, steps = _lazily(reaching, reached, (best, c.steps))
+        k = jnp.where(reaching, k + 1, k)
+        phase = jnp.where(reaching, after_reach(k, best), jnp.where(phase == CLOSE, DONE, CLOSE if closing else DONE))
+        if plan.objective is not None:
+            o = _lazily(c.phase == OPTIMISE, lambda: optimise(best.v, best.wrench, prob, plan), best._replace(model=None))
+            use = (c.phase == OPTIMISE) & (best.code == status.SUCCESS)
+            best = _where(use, Reach(o.v, o.wrench, o.e, best.steps, o.code, best.model), best)
+            steps = jnp.where(use, steps + o.steps, steps)
+        if not closing:
+            phase = jnp.where(phase == CLOSE, DONE, phase)
+        return Tried(phase, k, best, steps, x, info, c.i)
+
+    def body(c):  # a pass once DONE costs one test
+        return _lazily(c.phase != DONE, lambda: step(c), c)._replace(i=c.i + 1)
+
+    n = jnp.shape(wrench0)[0]
+    none = Reach(v0, jnp.full(n, jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT), cold)
+    first = after_reach(0, none)
+    init = Tried(jnp.where(closing | (first != CLOSE), first, DONE), 0, none, 0, jnp.zeros(n), unset_info(n), 0)
+    # the loop runs n_starts + 2 passes, the last ones no-ops once the phases are DONE: a bound that
+    # XLA finds without tracing the passes' data through the body (which it does for a loop whose
+    # condition reads the body's results, at a cost that grows with the body's size)
+    tried = lax.while_loop(lambda c: c.i < n_starts + 2, body, init)
+    r = tried.best
+    return Found(r.v, r.wrench, tried.steps, r.code, r.model, tried.x, tried.info)
 
 
 @find.defjvp
@@ -136,7 +162,7 @@ def _find_jvp(plan, primals, tangents):
         rhs = jnp.concatenate([-(dL + W @ dv_bound) * F, -rhs_e])
         dv = jnp.linalg.solve(K, rhs)[:n]
     dv = jnp.where(free, dv, dv_bound)
-    zero = jax.tree.map(_zero_like, (wrench, found.steps, found.code, found.model))
+    zero = jax.tree.map(_zero_like, (wrench, found.steps, found.code, found.model, found.x, found.info))
     return found, Found(dv, *zero)
 
 
@@ -152,7 +178,13 @@ def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, n_starts=STARTS, model=
     model = no_model(prob, plan) if model is None else model
     found = find(prob, v0, wrench0, n_starts, model, plan)
     act = actuation_of(found.v, prob, plan)
-    sol, C = solution_and_compliance(prob.robot, act, prob.load, prob.gravity, found.wrench, prob.solver)
+    problem = (prob.robot, act, prob.load, prob.gravity)
+    if prob.solver.intervals > 1:
+        sol, C = solution_and_compliance(*problem, found.wrench, prob.solver)
+    else:  # the closing solve of ``find``, differentiable
+        J_res, (J_p, J_R) = found.info.jacobians
+        sol = solution_at(*problem, prob.solver, at_root(*problem, prob.solver, found.x, J_res), found.info)
+        C = tip_compliance(prob.robot, sol.tip_rotation, J_res, J_p, J_R, force_scale(*problem))
     if isinstance(act, GeneralActuation):  # the driven tendons' tensions as found
         act = GeneralActuation._rebuild(sol.tensions, act.insertions, act.displacements, act.driven)
     position, orientation = pose_errors(sol.tip_position, sol.tip_rotation, prob.target)

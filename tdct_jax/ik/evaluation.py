@@ -7,10 +7,11 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax import lax
 
 from .. import general
 from ..inputs import GeneralActuation
-from ..shooting import compliance_at, force_scale, root, scaled, shoot, unscaled
+from ..shooting import at_root, force_scale, root, scaled, shoot, tip_compliance, unscaled
 from ..solve import solution_and_compliance
 from .objectives import objective_value
 from .problem import Plan, Problem, _wrench, actuation_of, task_residual
@@ -27,27 +28,85 @@ class Evaluation(NamedTuple):
     code: jax.Array  # the forward solve's status code
 
 
+def unset(v, wrench, prob: Problem) -> Evaluation:
+    """An Evaluation of zeros at the base wrench ``wrench`` (no evaluation): a loop's state
+    before its first, without tracing ``evaluate`` for the shapes."""
+    m, k = prob.target.size, v.shape[0]
+    return Evaluation(jnp.zeros(m), jnp.zeros((m, k)), jnp.zeros(()), jnp.zeros(k), wrench, jnp.zeros((), jnp.int32))
+
+
 def evaluate(v, guess, prob: Problem, plan: Plan) -> Evaluation:
     """Forward solve at v (from ``guess``) with the task residual, the objective and their exact
-    derivatives in v (forward mode through the implicitly differentiated root). Only the root and
-    one integration to the tip are differentiated: a user's objective, which sees the whole
-    Solution, adds the path."""
+    derivatives in v. A user's objective, which sees the whole Solution, goes through the
+    implicitly differentiated solve (``_through_solution``); the others take one forward-mode
+    pass over the shooting unknowns x and v together at the root (``_one_pass``)."""
+    if callable(plan.objective):
+        return _through_solution(v, guess, prob, plan)
+    act = actuation_of(v, prob, plan)
+    problem = (prob.robot, act, prob.load, prob.gravity)
+    F_c = force_scale(*problem)
+    x, info = root(*lax.stop_gradient(problem), guess, prob.solver)
+    # x with root's implicit derivatives, for the derivatives of this evaluation (``_find_jvp``)
+    x = at_root(*problem, prob.solver, x, info.jacobians[0])
+    e, G, phi, dphi = _one_pass(x, v, F_c, prob, plan)
+    return Evaluation(e, G, phi, dphi, unscaled(prob.robot, x, F_c), info.result)
+
+
+def _one_pass(x, v, F_c, prob: Problem, plan: Plan):
+    """(e, G, phi, dphi) at the root x at v from one forward-mode pass of the shooting residual r
+    and the tip pose over z = (x, v), with x eliminated by the implicit function theorem:
+    dz/dv = (-(dr/dx)^-1 dr/dv, I). The stiffness objective's compliance (eq. 41) comes from the
+    same pass's columns in x; its derivative in v, from a second pass, d(r, tip)/dx differentiated
+    along dz/dv."""
+    n, k = x.shape[0], v.shape[0]
+
+    def tip(z):
+        r, y = shoot(prob.robot, actuation_of(z[n:], prob, plan), prob.load, prob.gravity, prob.solver, z[:n], F_c)
+        return r, y.p, y.R
+
+    def in_x(z):
+        return jax.jacfwd(lambda x: tip(jnp.concatenate([x, z[n:]])))(z[:n])
+
+    z = jnp.concatenate([x, v])
+    (J_r, J_p, J_R), (_, p, R) = jax.jacfwd(lambda z: (lambda o: (o, o))(tip(z)), has_aux=True)(z)
+    D = jnp.concatenate([-jnp.linalg.solve(J_r[:, :n], J_r[:, n:]), jnp.eye(k)])
+
+    def each(f, primals, tangents, axes):  # f's derivative along every column of the tangents
+        return jax.vmap(lambda t: jax.jvp(f, primals, t)[1], in_axes=(axes,), out_axes=-1)(tangents)
+
+    def task(p, R):
+        return task_residual(p, R, prob.target, prob.robot.length)
+
+    e, G = task(p, R), each(task, (p, R), (J_p @ D, J_R @ D), (1, 2))
+    if plan.objective is None:
+        return e, G, jnp.zeros(()), jnp.zeros(k)
+    stiffness = plan.objective == "stiffness"
+
+    def objective(z, R, Jx):
+        act = actuation_of(z[n:], prob, plan)
+        if isinstance(act, GeneralActuation):  # the driven tensions found
+            act = general.with_driven(act, z[:n], F_c)
+        return objective_value(None, tip_compliance(prob.robot, R, *Jx, F_c) if stiffness else None, act, prob, plan)
+
+    Jx, dJx = ((J_r[:, :n], J_p[:, :n], J_R[..., :n]), each(lambda z: in_x(z), (z,), (D,), (1,))) if stiffness else ((), ())
+    primals = (z, R, Jx)
+    dphi = each(objective, primals, (D, J_R @ D, dJx), (1, 2, jax.tree.map(lambda _: -1, Jx)))
+    return e, G, objective(*primals), dphi
+
+
+def _through_solution(v, guess, prob: Problem, plan: Plan) -> Evaluation:
+    """``evaluate`` for a user's objective: forward mode through the implicitly differentiated
+    root and one integration to the tip, and the whole Solution for the objective."""
 
     def f(v):
         act = actuation_of(v, prob, plan)
         problem = (prob.robot, act, prob.load, prob.gravity)
         F_c = force_scale(*problem)
-        if callable(plan.objective):
-            sol = solution_and_compliance(*problem, guess, prob.solver)[0]
-            x, code, p, R = scaled(prob.robot, _wrench(sol, act), F_c), sol.result, sol.tip_position, sol.tip_rotation
-        else:
-            sol, (x, info) = None, root(*problem, guess, prob.solver)
-            tip = shoot(*problem, prob.solver, x, F_c)[1]
-            code, p, R = info.result, tip.p, tip.R
-        e = task_residual(p, R, prob.target, prob.robot.length)
-        C = compliance_at(*problem, prob.solver, x) if plan.objective == "stiffness" else None
+        sol = solution_and_compliance(*problem, guess, prob.solver)[0]
+        x, code = scaled(prob.robot, _wrench(sol, act), F_c), sol.result
+        e = task_residual(sol.tip_position, sol.tip_rotation, prob.target, prob.robot.length)
         pulled = general.with_driven(act, x, F_c) if isinstance(act, GeneralActuation) else act  # the driven tensions found
-        phi = jnp.zeros(()) if plan.objective is None else objective_value(sol, C, pulled, prob, plan)
+        phi = objective_value(sol, None, pulled, prob, plan)
         return (e, phi), (e, phi, unscaled(prob.robot, x, F_c), code)
 
     (G, dphi), (e, phi, wrench, code) = jax.jacfwd(f, has_aux=True)(v)

@@ -11,9 +11,9 @@ from jax import lax
 
 from .. import status
 from ..qp import box_qp
-from .evaluation import Evaluation, evaluate
+from .evaluation import Evaluation, evaluate, unset
 from .problem import Plan, Problem
-from .reach import MU_GIVE_UP, MU_START, Reach, _lm_step, _unset, _where
+from .reach import MU_GIVE_UP, MU_START, Reach, _lazily, _lm_step, _where
 
 KKT_TOL = 1e-7
 """Phase 2 has converged on the target when the projected gradient of the Lagrangian is below this
@@ -40,6 +40,7 @@ class SQPState(NamedTuple):
     it: jax.Array
     code: jax.Array
     done: jax.Array
+    passes: jax.Array  # of the loop: max_steps + 1, the last ones no-ops once done
 
 
 def optimise(v0, wrench0, prob: Problem, plan: Plan) -> Reach:
@@ -53,10 +54,11 @@ def optimise(v0, wrench0, prob: Problem, plan: Plan) -> Reach:
         ok = jnp.all(jnp.isfinite(ev.e)) & (ev.code == status.SUCCESS)
         return jnp.where(ok, ev.phi / scale + rho * jnp.sum(jnp.abs(ev.e)), jnp.inf)
 
-    def cond(state):
-        return ~state.done
-
     def body(state):
+        # a fixed number of passes: XLA bounds the loop without tracing the step's data through it
+        return _lazily(~state.done, lambda: step(state), state)._replace(passes=state.passes + 1)
+
+    def step(state):
         v, ev, kkt, H, s, lam, scale, rho, mu, corrected, it, *_ = state
         first = it == 0
         trial = evaluate(v + s, ev.wrench, prob, plan)
@@ -94,9 +96,9 @@ def optimise(v0, wrench0, prob: Problem, plan: Plan) -> Reach:
         )
         done = converged | failed | (it >= max_steps) | (mu >= MU_GIVE_UP)
         code = jnp.where(failed, ev.code, code).astype(jnp.int32)
-        return SQPState(v, ev, kkt, H, s, lam, scale, rho, mu, correct, it + 1, code, done)
+        return SQPState(v, ev, kkt, H, s, lam, scale, rho, mu, correct, it + 1, code, done, state.passes)
 
-    start = _unset(lambda v: evaluate(v, wrench0, prob, plan), v0)._replace(wrench=wrench0)
+    start = unset(v0, wrench0, prob)
     m = prob.target.size
     zero = jnp.zeros_like(v0)
     init = SQPState(
@@ -113,8 +115,9 @@ def optimise(v0, wrench0, prob: Problem, plan: Plan) -> Reach:
         0,
         jnp.int32(status.OUTER_LIMIT),
         False,
+        0,
     )
-    state = lax.while_loop(cond, body, init)
+    state = lax.while_loop(lambda state: state.passes <= max_steps, body, init)
     return Reach(state.v, state.ev.wrench, state.ev.e, state.it - 1, state.code)
 
 

@@ -12,7 +12,7 @@ from jax import lax
 from .. import status
 from ..qp import box_qp
 from ..shooting import force_scale, scaled, shoot, unscaled
-from .evaluation import Evaluation, evaluate
+from .evaluation import Evaluation, evaluate, unset
 from .problem import Plan, Problem, actuation_of, task_residual
 
 MU_START = 1e-3
@@ -93,9 +93,10 @@ class Reach(NamedTuple):
     model: Model | None = None  # reach_augmented's last linearisation (tip NaN)
 
 
-def _unset(f, *args):
-    """Zeros shaped like f(*args) (no evaluation): the loop state before the start is evaluated."""
-    return jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), jax.eval_shape(f, *args))
+def _lazily(needed, f, otherwise):
+    """f() where ``needed``, else ``otherwise``: a while loop of at most one pass rather than
+    ``lax.cond``, so that under ``vmap`` f runs only when some lane needs it."""
+    return lax.while_loop(lambda c: c[0], lambda c: (jnp.zeros_like(c[0]), f()), (needed, otherwise))[1]
 
 
 def _where(keep, new, old):
@@ -139,7 +140,7 @@ def reach_nested(v0, wrench0, prob: Problem, plan: Plan) -> Reach:
         s = _lm_step(ev.G, ev.e, mu, prob.lo - v, prob.hi - v)
         return NestedState(v, ev, s, mu, nu, it + 1, jnp.where(solved, code, ev.code), done | ~solved)
 
-    start = _unset(lambda v: evaluate(v, wrench0, prob, plan), v0)._replace(wrench=wrench0)
+    start = unset(v0, wrench0, prob)
     init = NestedState(
         v0, start, jnp.zeros_like(v0), jnp.asarray(MU_START), jnp.asarray(2.0), 0, jnp.int32(status.OUTER_LIMIT), False
     )
@@ -233,7 +234,8 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, model: Model | None 
         return AugmentedState(z, F, lin, s, mu, nu, it + 1, code, fresh, done & ~fresh)
 
     z0 = jnp.concatenate([scaled(robot, wrench0, F_s), v0])
-    F0, lin0 = _unset(linearise, z0)
+    m, k = prob.target.size, v0.shape[0]
+    F0, lin0 = jnp.zeros(n + m), Linearisation(jnp.zeros(n), jnp.zeros((n, k)), jnp.zeros((m, k)), jnp.zeros(m))  # unset
     s0, mu0, warm = jnp.zeros_like(v0), jnp.asarray(MU_START), jnp.asarray(False)
     if model is not None:
         # the boundary residual is converged at v0; e there from the tip, for the new target

@@ -1,0 +1,361 @@
+"""Calibration of a robot on its rig from a recording (servo readings in, measured tips out), and
+the prediction of a held-out recording with the fitted values frozen.
+
+Any robot field and any rig value (``rig.py``: servo scale, pretensions, registration, gravity's
+direction) is fitted by Levenberg-Marquardt with bounds on the tip residuals, model minus
+measured in the measurement frame, with the Jacobian exact: forward-mode autodiff through the
+implicitly differentiated displacement-driven solve of every sample. The first step solves along
+the recorded sequence (``rig.along``); every later one starts each sample from its solution at the
+step before, side by side (Newton without a load ramp), and a trial where some sample fails
+counts as a failed step (Levenberg-Marquardt then takes a shorter one).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from functools import partial
+from pathlib import Path
+from time import perf_counter
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from tqdm import tqdm
+
+from . import rig as rigs
+from . import status
+from .checks import check_integer
+from .lm import covariance, levenberg_marquardt
+from .options import SolverOptions
+from .recording import Recording, check_tendons
+
+RIG_SOLVER = SolverOptions(steps=8)
+"""Solver for recordings: 8 RK4 steps per interval between breakpoints moves the tips of the
+three-segment example by under 0.1 um against 40 steps, far below any motion capture's noise."""
+RIG_PARAMS = ("sections[*].E", "scale", "rotation[0]", "rotation[1]", "translation[0]", "translation[1]", "translation[2]")
+"""A default fit: the backbone's modulus, the servo scale and the registration (rotation about the
+robot axis is left to the tendon angles, with which it is degenerate)."""
+
+
+def _values(x, params) -> dict:
+    """Named values from the fitted coordinates: as they are where ``rig.is_linear``, else exp."""
+    return {p: x[i] if rigs.is_linear(p) else jnp.exp(x[i]) for i, p in enumerate(params)}
+
+
+def _coordinates(values, params) -> np.ndarray:
+    return np.array([v if rigs.is_linear(p) else np.log(v) for p, v in zip(params, values, strict=True)], float)
+
+
+@partial(jax.jit, static_argnames=("params", "solver"))
+def _fit_step(x, rig, servos, guesses, measured, params, solver):
+    """Tip residuals (3 n,) [m], their exact Jacobian in x, the unknowns found and status codes."""
+
+    def residual(x):
+        # warm starts need no load ramp from zero, and under vmap one failing sample would make
+        # every sample run all of its stages
+        warm = dataclasses.replace(solver, stages=(1,))
+        tip, unknowns, code = rigs._batch(rigs.replace(rig, _values(x, params)), servos, guesses, warm)
+        r = (tip - measured).ravel()
+        return r, (r, unknowns, code)
+
+    J, (r, unknowns, codes) = jax.jacfwd(residual, has_aux=True)(x)
+    return r, J, unknowns, codes
+
+
+@dataclasses.dataclass(frozen=True)
+class RigCalibration:
+    """Result of ``calibrate_rig``; SI units (m, N, Pa, rad).
+
+    Attributes:
+        params: the fitted names (``rig.py``). initial, values: their start and fitted values.
+        std_errors: standard errors, s^2 (J^T J)^+ with s^2 the residual variance per coordinate
+            (delta method for values fitted in log space).
+        correlation: their correlation matrix (p, p): entries near +-1 mark values the data
+            cannot tell apart.
+        rig: the starting rig with the fitted values.
+        before, after: tip errors on the fitted recording before and after (``rig.errors``).
+        history: the tip RMSE [m] (registration as fitted, no offset removed) at the start and
+            after each accepted step.
+        noise: residual standard deviation per coordinate [m].
+        iterations, result, message: Levenberg-Marquardt's outcome (``converged``: result ==
+            SUCCESS); an unconverged fit keeps its best values.
+        seconds: wall time, compiles included.
+    """
+
+    params: tuple
+    initial: dict
+    values: dict
+    std_errors: dict
+    correlation: np.ndarray
+    rig: rigs.Rig
+    before: dict
+    after: dict
+    history: tuple
+    noise: float
+    iterations: int
+    result: int
+    message: str
+    seconds: float
+
+    @property
+    def converged(self) -> bool:
+        return self.result == status.SUCCESS
+
+    def to_dict(self) -> dict:
+        """JSON-ready: values and standard errors in SI units, errors in mm."""
+        return {
+            "params": list(self.params),
+            "initial": self.initial,
+            "values": self.values,
+            "std_errors": self.std_errors,
+            "correlation": np.round(self.correlation, 4).tolist(),
+            "before_mm": _mm(self.before),
+            "after_mm": _mm(self.after),
+            "history_rmse_mm": [1e3 * h for h in self.history],
+            "noise_mm": 1e3 * self.noise,
+            "iterations": self.iterations,
+            "converged": self.converged,
+            "message": self.message,
+            "seconds": self.seconds,
+        }
+
+    def summary(self) -> str:
+        """A text table: values with standard errors, the strongest correlations, the tip errors."""
+        w = max(20, *(len(p) + 2 for p in self.params))
+        lines = [f"{'value':<{w}}{'initial':>13}{'fitted':>13}{'std error':>12}"]
+        lines += [f"{p:<{w}}{self.initial[p]:>13.6g}{self.values[p]:>13.6g}{self.std_errors[p]:>12.3g}" for p in self.params]
+        i, j = np.triu_indices(len(self.params), 1)
+        strong = sorted(zip(np.abs(self.correlation[i, j]), i, j, strict=True), reverse=True)[:5]
+        if strong:
+            lines.append(
+                "\nstrongest correlations: "
+                + ", ".join(f"{self.params[a]} ~ {self.params[b]} {self.correlation[a, b]:+.2f}" for _, a, b in strong)
+            )
+        b, a = self.before, self.after
+        lines.append(
+            f"\ntip error, mean offset removed: RMSE {1e3 * b['rmse']:.2f} -> {1e3 * a['rmse']:.2f} mm "
+            f"(median {1e3 * a['median']:.2f}, 95th percentile {1e3 * a['p95']:.2f} mm, {a['n']} samples)"
+        )
+        state = "converged" if self.converged else f"NOT converged: {self.message}"
+        lines.append(f"{state} after {self.iterations} steps in {self.seconds:.1f} s")
+        return "\n".join(lines)
+
+
+def _mm(errors: dict) -> dict:
+    return {k: (np.round(1e3 * np.asarray(v), 4).tolist() if k != "n" else v) for k, v in errors.items()}
+
+
+def _servos(rig: rigs.Rig, rec: Recording) -> np.ndarray:
+    check_tendons(rec, rig.robot.n_tendons)
+    if rec.displacements is None or rec.tip is None:
+        raise ValueError(f"{rec.path}: a rig calibration needs displacement columns and tip columns")
+    return rec.displacements
+
+
+def calibrate_rig(
+    rig: rigs.Rig,
+    recording: Recording,
+    params: Sequence[str] = RIG_PARAMS,
+    *,
+    bounds: Mapping[str, tuple] | None = None,
+    max_steps: int = 40,
+    xtol: float = 1e-6,
+    ftol: float = 1e-8,
+    solver: SolverOptions = RIG_SOLVER,
+    progress: bool = True,
+    throw: bool = True,
+) -> RigCalibration:
+    """Fits rig and robot values to a recording by bounded Levenberg-Marquardt with exact Jacobians.
+
+    Args:
+        rig: the robot on its rig with the starting values and every value not fitted.
+        recording: servo readings (``displacements``) and measured tips (``recording.py``).
+        params: names to fit (``rig.py``; robot fields as in ``fields.py``, ranges ``[a-b]``).
+            Fitted ``translation`` components start at the mean offset between the measured tips
+            and the model's at the start (their least-squares value there).
+        bounds: {name: (lo, hi)} in SI units; pretensions are kept >= 0 unless given.
+        max_steps: most Levenberg-Marquardt trial steps. xtol: converged when the bounded
+            Gauss-Newton step moves no coordinate by more than this (relative for values fitted
+            in log space); ftol: or when a step lowers the squared error by at most this
+            fraction (values the data cannot tell apart let the steps stay long).
+        solver: SolverOptions for every sample.
+        progress: show a progress bar (the first step includes the compile).
+        throw: raise ConvergenceError when the fit does not converge; with False check ``converged``.
+
+    Raises:
+        ValueError: unknown or repeated names, bounds that do not hold the start, a recording that
+            does not fit the robot.
+    """
+    params = (params,) if isinstance(params, str) else tuple(params)
+    if not params or len(set(params)) != len(params):
+        raise ValueError(f"params = {params!r} must name at least one value, each once")
+    for p in params:
+        rigs.check_name(rig, p)
+    max_steps = check_integer("max_steps", max_steps)
+    servos, measured = jnp.asarray(_servos(rig, recording)), jnp.asarray(recording.tip)
+    start = perf_counter()
+    bar = tqdm(desc="calibrating", unit="step", disable=not progress, leave=False)
+    bar.set_postfix_str("solving along the recording (compiling)")
+    tip, unknowns, _ = rigs.along(rig, servos, solver)
+    guesses = [unknowns]
+    offset = np.mean(np.asarray(measured) - np.asarray(tip), axis=0)
+    shifted = {f"translation[{i}]": float(rig.translation[i] + offset[i]) for i in range(3)}
+    rig = rigs.replace(rig, {k: v for k, v in shifted.items() if k in params})
+    initial = {p: rigs.value(rig, p) for p in params}
+    lo, hi = _bounds(params, initial, bounds or {})
+    history, first = [], []
+
+    def evaluate(x):
+        r, J, unknowns, codes = _fit_step(jnp.asarray(x), rig, servos, guesses[0], measured, params, solver)
+        codes = np.asarray(codes)
+        if np.all(codes == status.SUCCESS):
+            guesses[0] = unknowns
+        r = np.asarray(r)
+        first[:] = first or [r]
+        history[:] = history or [float(np.sqrt(np.mean(r**2) * 3))]
+        return r, np.asarray(J), _first(codes), r
+
+    def report(it, r, step):
+        history.append(float(np.sqrt(np.mean(r**2) * 3)))
+        bar.update(it - bar.n)
+        bar.set_postfix_str(f"tip rms {1e3 * history[-1]:.3f} mm, step {np.abs(step).max():.1e}")
+
+    x0 = _coordinates(initial.values(), params)
+    fit = levenberg_marquardt(evaluate, x0, lower=lo, upper=hi, max_steps=max_steps, xtol=xtol, ftol=ftol, callback=report)
+    bar.close()
+    values = {p: float(v) for p, v in _values(fit.x, params).items()}
+    _, se_x, correlation, s2 = covariance(fit, measured.size)
+    scale = np.array([1.0 if rigs.is_linear(p) else values[p] for p in params])
+    fitted = rigs.replace(rig, values)
+    measured = np.asarray(measured)
+    result = RigCalibration(
+        params=params,
+        initial=initial,
+        values=values,
+        std_errors={p: float(scale[i] * se_x[i]) for i, p in enumerate(params)},
+        correlation=correlation,
+        rig=fitted,
+        before=rigs.errors(measured + first[0].reshape(-1, 3), measured),
+        after=rigs.errors(measured + fit.aux.reshape(-1, 3), measured),
+        history=tuple(history),
+        noise=float(np.sqrt(s2)),
+        iterations=fit.iterations,
+        result=fit.result,
+        message=fit.message,
+        seconds=perf_counter() - start,
+    )
+    status.check(fit.result, throw=throw, what=f"the rig calibration of {', '.join(params)}", max_steps=max_steps)
+    return result
+
+
+def _bounds(params, initial, bounds):
+    """Bounds in the fitted coordinates, (lo, hi) each (p,); ValueError for a bound that does not
+    hold the start or names an unfitted value."""
+    unknown = set(bounds) - set(params)
+    if unknown:
+        raise ValueError(f"bounds name {sorted(unknown)}, which are not in params {list(params)}")
+    lo, hi = np.full(len(params), -np.inf), np.full(len(params), np.inf)
+    for i, p in enumerate(params):
+        a, b = bounds.get(p, (0.0, np.inf) if p.startswith("pretension") else (-np.inf, np.inf))
+        if not a <= initial[p] <= b:
+            raise ValueError(f"bounds[{p!r}] = ({a:g}, {b:g}) must hold the starting value {initial[p]:g}")
+        if rigs.is_linear(p):
+            lo[i], hi[i] = a, b
+        else:
+            lo[i] = np.log(a) if a > 0 else -np.inf
+            hi[i] = np.log(b) if np.isfinite(b) else np.inf
+    return lo, hi
+
+
+@dataclasses.dataclass(frozen=True)
+class Prediction:
+    """Result of ``predict``: the model's tips for a recording's servo readings, and their errors.
+
+    Attributes:
+        tips, measured: model and measured tips in the measurement frame [m], (n, 3).
+        patterns: each sample's motion pattern (``Recording.patterns``).
+        codes: each sample's status code; failed samples are left out of the errors.
+        errors: tip errors with the mean offset removed (``rig.errors``).
+        per_pattern: {pattern family: errors}, the family a pattern without its trailing
+            ``_dir<angle>``, the offset removed being the whole recording's.
+        seconds_per_pose: wall time of one pass along the recording (compiled before) over its
+            samples.
+    """
+
+    tips: np.ndarray
+    measured: np.ndarray
+    patterns: np.ndarray
+    codes: np.ndarray
+    errors: dict
+    per_pattern: dict
+    seconds_per_pose: float
+
+    def to_dict(self) -> dict:
+        return {
+            "errors_mm": _mm(self.errors),
+            "per_pattern_mm": {k: _mm(v) for k, v in self.per_pattern.items()},
+            "failed_samples": int(np.count_nonzero(self.codes)),
+            "seconds_per_pose": self.seconds_per_pose,
+        }
+
+
+def predict(rig: rigs.Rig, recording: Recording, *, solver: SolverOptions = RIG_SOLVER) -> Prediction:
+    """The model's tips for a recording's servo readings alone (along the sequence, warm-started
+    sample by sample, as a controller would run it), and their errors against its measured tips."""
+    servos = jnp.asarray(_servos(rig, recording))
+    jax.block_until_ready(rigs.along(rig, servos, solver))
+    t = perf_counter()
+    tips, _, codes = jax.block_until_ready(rigs.along(rig, servos, solver))
+    seconds = (perf_counter() - t) / len(servos)
+    tips, codes, measured = np.asarray(tips), np.asarray(codes), np.asarray(recording.tip)
+    ok = codes == status.SUCCESS
+    errors = rigs.errors(tips[ok], measured[ok])
+    families = np.array([_family(p) for p in recording.patterns()])
+    per_pattern = {}
+    for f in dict.fromkeys(families):
+        m = ok & (families == f)
+        e = np.linalg.norm(tips[m] + errors["offset"] - measured[m], axis=1)
+        per_pattern[f] = dict(
+            rmse=float(np.sqrt(np.mean(e**2))),
+            mean=float(e.mean()),
+            median=float(np.median(e)),
+            p95=float(np.percentile(e, 95)),
+            n=int(e.size),
+        )
+    return Prediction(tips, measured, recording.patterns(), codes, errors, per_pattern, seconds)
+
+
+def _family(pattern: str) -> str:
+    head, _, tail = pattern.rpartition("_dir")
+    return head if head and tail.isdigit() else pattern
+
+
+def synthesize_recording(
+    rig: rigs.Rig, servos, *, noise: float = 0.0, seed: int = 0, labels=None, solver: SolverOptions = RIG_SOLVER
+) -> Recording:
+    """A recording made by the model: the rig's tips for servo readings (n, n_t) [m] along the
+    sequence, plus Gaussian noise of standard deviation ``noise`` [m] on every coordinate (numpy's
+    generator seeded with ``seed``); for checking a calibration against known values.
+
+    Raises:
+        ValueError: bad shapes or noise; ConvergenceError: a sample that did not solve.
+    """
+    servos = np.asarray(servos, float)
+    if servos.ndim != 2 or servos.shape[1] != rig.robot.n_tendons:
+        raise ValueError(f"servos has shape {servos.shape}: (samples, {rig.robot.n_tendons}) expected, one per tendon")
+    if not (np.isfinite(noise) and noise >= 0):
+        raise ValueError(f"noise = {noise!r} must be a finite standard deviation >= 0 [m]")
+    tip, _, codes = rigs.along(rig, jnp.asarray(servos), solver)
+    status.check(_first(np.asarray(codes)), throw=True, what="synthesize_recording", max_iter=solver.max_iter)
+    tip = np.asarray(tip) + noise * np.random.default_rng(seed).standard_normal((len(servos), 3))
+    n, k = servos.shape
+    labels = np.full(n, "synthetic") if labels is None else np.asarray(labels, dtype=str)
+    columns = (("label", "label", ""), *(("displacements", f"d{i + 1}_m", "m") for i in range(k)))
+    columns += tuple(("tip", f"tip_{c}_m", "m") for c in "xyz")
+    return Recording("synthetic", Path("synthetic"), labels, None, servos, None, None, tip, columns, np.arange(2, n + 2))
+
+
+def _first(codes) -> int:
+    bad = np.flatnonzero(codes)
+    return int(codes[bad[0]]) if bad.size else status.SUCCESS
