@@ -69,13 +69,6 @@ def _fit_step(x, robot, batch, gravity, solver, params):
 _model_shapes = jax.jit(_deviations)
 
 
-def _first_failure(codes) -> int:
-    """The first nonzero status code, or SUCCESS."""
-    codes = np.asarray(codes).ravel()
-    bad = np.flatnonzero(codes)
-    return int(codes[bad[0]]) if bad.size else status.SUCCESS
-
-
 @dataclasses.dataclass(frozen=True)
 class Calibration:
     """Result of ``calibrate``; SI units (lengths in m) unless a name says otherwise.
@@ -235,7 +228,7 @@ def calibrate(
         r, J, (codes, e_rms, e_tip, sol) = _fit_step(jnp.asarray(x), robot, batch, g, solver, params)
         stats = (np.asarray(e_rms), np.asarray(e_tip), sol)
         first[:] = first or [stats]
-        return np.asarray(r), np.asarray(J), _first_failure(codes), stats
+        return np.asarray(r), np.asarray(J), status.first_failure(codes), stats
 
     def report(it, r, step):
         bar.update(it - bar.n)

@@ -214,7 +214,7 @@ def calibrate_rig(
         r = np.asarray(r)
         first[:] = first or [r]
         history[:] = history or [float(np.sqrt(np.mean(r**2) * 3))]
-        return r, np.asarray(J), _first(codes), r
+        return r, np.asarray(J), status.first_failure(codes), r
 
     def report(it, r, step):
         history.append(float(np.sqrt(np.mean(r**2) * 3)))
@@ -291,6 +291,11 @@ class Prediction:
     per_pattern: dict
     seconds_per_pose: float
 
+    @property
+    def families(self) -> np.ndarray:
+        """Each sample's pattern family, (n,) str: its pattern without a trailing ``_dir<angle>``."""
+        return np.array([_family(p) for p in self.patterns])
+
     def to_dict(self) -> dict:
         return {
             "errors_mm": _mm(self.errors),
@@ -311,18 +316,11 @@ def predict(rig: rigs.Rig, recording: Recording, *, solver: SolverOptions = RIG_
     tips, codes, measured = np.asarray(tips), np.asarray(codes), np.asarray(recording.tip)
     ok = codes == status.SUCCESS
     errors = rigs.errors(tips[ok], measured[ok])
-    families = np.array([_family(p) for p in recording.patterns()])
     per_pattern = {}
+    families = np.array([_family(p) for p in recording.patterns()])
     for f in dict.fromkeys(families):
         m = ok & (families == f)
-        e = np.linalg.norm(tips[m] + errors["offset"] - measured[m], axis=1)
-        per_pattern[f] = dict(
-            rmse=float(np.sqrt(np.mean(e**2))),
-            mean=float(e.mean()),
-            median=float(np.median(e)),
-            p95=float(np.percentile(e, 95)),
-            n=int(e.size),
-        )
+        per_pattern[f] = {k: v for k, v in rigs.errors(tips[m], measured[m], errors["offset"]).items() if k != "offset"}
     return Prediction(tips, measured, recording.patterns(), codes, errors, per_pattern, seconds)
 
 
@@ -347,15 +345,10 @@ def synthesize_recording(
     if not (np.isfinite(noise) and noise >= 0):
         raise ValueError(f"noise = {noise!r} must be a finite standard deviation >= 0 [m]")
     tip, _, codes = rigs.along(rig, jnp.asarray(servos), solver)
-    status.check(_first(np.asarray(codes)), throw=True, what="synthesize_recording", max_iter=solver.max_iter)
+    status.check(status.first_failure(codes), throw=True, what="synthesize_recording", max_iter=solver.max_iter)
     tip = np.asarray(tip) + noise * np.random.default_rng(seed).standard_normal((len(servos), 3))
     n, k = servos.shape
     labels = np.full(n, "synthetic") if labels is None else np.asarray(labels, dtype=str)
     columns = (("label", "label", ""), *(("displacements", f"d{i + 1}_m", "m") for i in range(k)))
     columns += tuple(("tip", f"tip_{c}_m", "m") for c in "xyz")
     return Recording("synthetic", Path("synthetic"), labels, None, servos, None, None, tip, columns, np.arange(2, n + 2))
-
-
-def _first(codes) -> int:
-    bad = np.flatnonzero(codes)
-    return int(codes[bad[0]]) if bad.size else status.SUCCESS

@@ -597,7 +597,7 @@ def plot_prediction(prediction, calibration=None, path: str | Path | None = None
     families = list(prediction.per_pattern)
     fig = plt.figure(figsize=(4.2 * max(len(families), 2), 8.2))
     grid = fig.add_gridspec(2, max(len(families), 2) * 2)
-    fam = np.array([p.rpartition("_dir")[0] if p.rpartition("_dir")[2].isdigit() else p for p in prediction.patterns])
+    fam = prediction.families
     tips, measured = 1e3 * (prediction.tips + prediction.errors["offset"]), 1e3 * prediction.measured
     for k, f in enumerate(families):
         ax = fig.add_subplot(grid[0, 2 * k : 2 * k + 2])

@@ -299,24 +299,12 @@ def _batch(rig: Rig, servos, guesses, solver: SolverOptions = DEFAULT_SOLVER):
     return jax.vmap(lambda s, g: solve_sample(rig, s, g, solver))(servos, guesses)
 
 
-def tips(rig: Rig, servos, guesses=None, solver: SolverOptions = DEFAULT_SOLVER):
-    """The model's tips in the measurement frame (n, 3) for servo readings (n, n_t) [m], with the
-    unknowns found and status codes: side by side from ``guesses`` (n, 6 + n_t), e.g. the last
-    fit step's; samples that fail there (and all, without guesses) along the sequence (``along``)."""
-    servos = jnp.asarray(servos, float)
-    if guesses is not None:
-        out = _batch(rig, servos, guesses, solver)
-        if np.all(np.asarray(out[2]) == status.SUCCESS):
-            return out
-    return along(rig, servos, solver)
-
-
-def errors(predicted, measured) -> dict:
-    """Tip errors after removing the mean offset between predicted and measured tips (n, 3) [m]:
-    RMSE (the Euclidean error's root mean square), mean, median and 95th percentile [m], and the
-    offset removed (3,)."""
+def errors(predicted, measured, offset=None) -> dict:
+    """Tip errors after removing an offset between predicted and measured tips (n, 3) [m] (by
+    default their mean offset): RMSE (the Euclidean error's root mean square), mean, median and
+    95th percentile [m], the offset removed (3,) and the sample count."""
     predicted, measured = np.asarray(predicted), np.asarray(measured)
-    offset = np.mean(measured - predicted, axis=0)
+    offset = np.mean(measured - predicted, axis=0) if offset is None else np.asarray(offset)
     e = np.linalg.norm(predicted + offset - measured, axis=1)
     return dict(
         rmse=float(np.sqrt(np.mean(e**2))),

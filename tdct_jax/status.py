@@ -147,3 +147,10 @@ def _raise_first(result: np.ndarray, what: str, context: dict) -> None:
         return f"{said} did not converge{where}: {message(code, cli=cli, what=said, **values)}"
 
     raise ConvergenceError(text(False), code, text(True))
+
+
+def first_failure(codes) -> int:
+    """The first nonzero code of ``codes`` (any shape), or SUCCESS."""
+    codes = np.asarray(codes).ravel()
+    bad = np.flatnonzero(codes)
+    return int(codes[bad[0]]) if bad.size else SUCCESS
