@@ -25,6 +25,9 @@ from .description import PointMass as PointMass  # noqa: E402
 from .description import Section as Section  # noqa: E402
 from .description import Tendon as Tendon  # noqa: E402
 from .description import Tube as Tube  # noqa: E402
+from .estimate import ForceEstimate as ForceEstimate  # noqa: E402
+from .estimate import TipPose as TipPose  # noqa: E402
+from .estimate import estimate_force as estimate_force  # noqa: E402
 from .ik import Bounds as Bounds  # noqa: E402
 from .ik import IKOptions as IKOptions  # noqa: E402
 from .ik import IKResult as IKResult  # noqa: E402
@@ -67,6 +70,12 @@ from .results import gather as gather  # noqa: E402
 from .rig import Rig as Rig  # noqa: E402
 from .robot import CalibrationWarning as CalibrationWarning  # noqa: E402
 from .robot import Robot as Robot  # noqa: E402
+from .scene import Capsule as Capsule  # noqa: E402
+from .scene import Distance as Distance  # noqa: E402
+from .scene import Plane as Plane  # noqa: E402
+from .scene import Scene as Scene  # noqa: E402
+from .scene import Sphere as Sphere  # noqa: E402
+from .scene import read_scene as read_scene  # noqa: E402
 from .solve import GeneralSolution as GeneralSolution  # noqa: E402
 from .solve import Solution as Solution  # noqa: E402
 from .solve import solve as solve  # noqa: E402
