@@ -26,6 +26,9 @@ from .description import PointMass as PointMass  # noqa: E402
 from .description import Section as Section  # noqa: E402
 from .description import Tendon as Tendon  # noqa: E402
 from .description import Tube as Tube  # noqa: E402
+from .estimate import ForceEstimate as ForceEstimate  # noqa: E402
+from .estimate import TipPose as TipPose  # noqa: E402
+from .estimate import estimate_force as estimate_force  # noqa: E402
 from .ik import Bounds as Bounds  # noqa: E402
 from .ik import IKOptions as IKOptions  # noqa: E402
 from .ik import IKResult as IKResult  # noqa: E402
