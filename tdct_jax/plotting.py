@@ -635,3 +635,34 @@ def plot_prediction(prediction, calibration=None, path: str | Path | None = None
     if title:
         fig.suptitle(title)
     return _finish(fig, path)
+
+
+@_styled
+def plot_contact_press(res: dict, path: str | Path | None = None, title: str | None = None):
+    """The tip pressed on a table against insertion (``paper.contact_press``): the normal force on
+    the table, and the tip compliance in contact beside the free robot's, along x (across the
+    bending plane), y (the table's normal) and z (along the table in the bending plane)."""
+    plt = _pyplot()
+    d = 1e3 * np.asarray(res["insertion"])
+    ok = np.asarray(res["result"]) == 0
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4))
+    ax.plot(d[ok], np.asarray(res["force"])[ok], "o-", ms=4, label="on the table, total")
+    ax.plot(d[ok], np.asarray(res["tip_force"])[ok], "x--", ms=5, label="at the tip")
+    ax.set_xlabel("insertion $d$ [mm]")
+    ax.set_ylabel("normal force [N]")
+    ax.set_ylim(bottom=0)
+    ax.legend(fontsize=8)
+    ax.set_title("how hard the tip presses", fontsize=10)
+    for k, (axis, colour) in enumerate(zip("xyz", ("C0", "C2", "C1"), strict=True)):
+        bx.plot(d[ok], 1e3 * np.asarray(res["free_compliance"])[ok, k, k], "--", color=colour, label=f"{axis}, free")
+        bx.plot(d[ok], 1e3 * np.asarray(res["compliance"])[ok, k, k], "o-", ms=3, color=colour, label=f"{axis}, on the table")
+    bx.set_yscale("symlog", linthresh=1e-2)
+    bx.set_xlabel("insertion $d$ [mm]")
+    bx.set_ylabel("tip compliance [mm/N]")
+    bx.legend(fontsize=7, ncol=3)
+    bx.set_title("the stiffness a hand feels at the tip", fontsize=10)
+    if not ok.all():
+        fig.text(0.01, 0.01, f"{np.count_nonzero(~ok)} insertions did not converge (not drawn)", fontsize=8, color="C3")
+    if title:
+        fig.suptitle(title)
+    return _finish(fig, path)
