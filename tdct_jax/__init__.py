@@ -16,6 +16,7 @@ from .calibrate_rig import calibrate_rig as calibrate_rig  # noqa: E402
 from .calibrate_rig import predict as predict  # noqa: E402
 from .calibrate_rig import synthesize_recording as synthesize_recording  # noqa: E402
 from .checks import UnitWarning as UnitWarning  # noqa: E402
+from .contact import Contact as Contact  # noqa: E402
 from .data import Experiment as Experiment  # noqa: E402
 from .data import read_experiment as read_experiment  # noqa: E402
 from .data import read_experiments as read_experiments  # noqa: E402
@@ -67,6 +68,12 @@ from .results import gather as gather  # noqa: E402
 from .rig import Rig as Rig  # noqa: E402
 from .robot import CalibrationWarning as CalibrationWarning  # noqa: E402
 from .robot import Robot as Robot  # noqa: E402
+from .scene import Capsule as Capsule  # noqa: E402
+from .scene import Distance as Distance  # noqa: E402
+from .scene import Plane as Plane  # noqa: E402
+from .scene import Scene as Scene  # noqa: E402
+from .scene import Sphere as Sphere  # noqa: E402
+from .scene import read_scene as read_scene  # noqa: E402
 from .solve import GeneralSolution as GeneralSolution  # noqa: E402
 from .solve import Solution as Solution  # noqa: E402
 from .solve import solve as solve  # noqa: E402

@@ -50,10 +50,11 @@ def force_scale(robot: Robot, act: Actuation, load: TipLoad, gravity):
     return jnp.maximum(F, 1e-3)
 
 
-def straight_rod(robot: Robot, act: Actuation, load: TipLoad, gravity, F_c):
-    """Scaled base unknowns of the straight rod: exact in force, first-order in moment."""
+def straight_rod(robot: Robot, act: Actuation, load: TipLoad, gravity, F_c, steps: int | None = None):
+    """Scaled base unknowns of the straight rod: exact in force, first-order in moment (with a
+    scene, ``steps`` given: no contact force, ``general.straight_rod``)."""
     if isinstance(robot, GeneralRobot):
-        return general.straight_rod(robot, act, load, gravity, F_c)
+        return general.straight_rod(robot, act, load, gravity, F_c, steps)
     L, d = robot.length, act.insertion
     rho1, rho2 = robot.linear_density(False), robot.tube_linear_density
     N0 = load.force + gravity * (rho1 * L + rho2 * d)
@@ -138,13 +139,13 @@ class RootInfo(NamedTuple):
     jacobians: tuple
 
 
-def starts(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, F_c):
+def starts(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, F_c, steps: int | None = None):
     """Newton's scaled start: ``guess`` (``root``) where finite, else the straight rod; and the
-    straight rod's unknowns."""
-    x_straight = straight_rod(robot, act, load, gravity, F_c)
+    straight rod's unknowns (``straight_rod``; any contact forces not guessed: zero)."""
+    x_straight = straight_rod(robot, act, load, gravity, F_c, steps)
     finite = jnp.all(jnp.isfinite(guess))
     start = scaled(robot, guess, F_c)
-    if x_straight.size > start.size:  # a GeneralRobot's displacement-driven tensions, not guessed
+    if x_straight.size > start.size:  # a GeneralRobot's displacement-driven tensions and contact forces
         start = jnp.concatenate([start, x_straight[start.size :]])
     return jnp.where(finite, start, x_straight), x_straight
 
@@ -174,7 +175,7 @@ def root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: So
 def _root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: SolverOptions):
     """``root`` by single shooting."""
     F_c = force_scale(robot, act, load, gravity)
-    x0, x_straight = starts(robot, act, load, gravity, guess, F_c)
+    x0, x_straight = starts(robot, act, load, gravity, guess, F_c, solver.steps)
 
     def F_at(lam):
         act_lam, load_lam, gravity_lam = loads_at(robot, act, load, gravity, lam)
@@ -218,7 +219,9 @@ def quick_root(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: Sol
         res, tip = shoot(robot, act, load, gravity, solver, x, F_c)
         return res, (tip.p, tip.R)
 
-    x, res, (p, R), steps, code = broyden(F, straight_rod(robot, act, load, gravity, F_c), QUICK_TOL * solver.tol, max_steps)
+    x, res, (p, R), steps, code = broyden(
+        F, straight_rod(robot, act, load, gravity, F_c, solver.steps), QUICK_TOL * solver.tol, max_steps
+    )
     return QuickRoot(x, res, p, R, steps, code)
 
 
