@@ -498,6 +498,8 @@ def _conditions(args, act) -> str:
         parts.append(f"tip force ({', '.join(f'{f:g}' for f in args.tip_force)}) N")
     if args.point_load:
         parts.append(f"{len(args.point_load)} point load(s)")
+    if getattr(args, "scene", None):
+        parts.append(f"scene {Path(args.scene).name}")
     return ", ".join(parts) or "no load"
 
 
