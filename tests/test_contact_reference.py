@@ -21,6 +21,8 @@ Compiled configurations: the robot's contact-free solve and its contact solve, 8
 each (the discretisation error below 1e-10 m here: ``test_rk4_error_is_fourth_order``).
 """
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
@@ -42,6 +44,7 @@ TIP_ATOL = 1e-6  # m (issue 26, acceptance 2)
 FORCE_ATOL = 1e-6  # N
 RK4_ATOL = 1e-7  # m: tdct_jax's own discretisation error allowed at STEPS
 GAP_ATOL = 1e-9  # m: the contact solve's gap at the tip
+DERIVATIVE_RTOL = 1e-6  # the reference's central differences: truncation and root tolerances well below
 
 AREA = np.pi / 4 * DIAMETER**2
 EI = MODULUS * np.pi / 64 * DIAMETER**4
@@ -96,10 +99,10 @@ def free_end(f, g):
     return integrate(brentq(moment_at_tip, guess - width, guess + width, xtol=1e-15, rtol=1e-15), f, g)
 
 
-def resting_on_the_table(g):
+def resting_on_the_table(g, depth=TABLE_DEPTH):
     """(f, shape): the tip force along the table's normal +y that puts the tip's centre one body
-    radius above the table."""
-    height = lambda f: free_end(f, g).y[0, -1] - (DIAMETER / 2 - TABLE_DEPTH)  # noqa: E731
+    radius above the table, ``depth`` [m] below the base's axis."""
+    height = lambda f: free_end(f, g).y[0, -1] - (DIAMETER / 2 - depth)  # noqa: E731
     f = brentq(height, 0.0, 1.0, xtol=1e-14, rtol=1e-14)
     return f, free_end(f, g)
 
@@ -112,8 +115,15 @@ def robot():
     return tdct.GeneralRobot(LENGTH, (section,), (tdct.Tendon(offset=OFFSET, angle=1.5 * np.pi),))
 
 
-def table():
-    return tdct.Scene((tdct.Plane(point=(0.0, -TABLE_DEPTH, 0.0), normal=(0.0, 1.0, 0.0), name="table"),), every=EVERY)
+def table(depth=TABLE_DEPTH):
+    return tdct.Scene((tdct.Plane(point=jnp.stack([0.0, -depth, 0.0]), normal=(0.0, 1.0, 0.0), name="table"),), every=EVERY)
+
+
+def on_the_table(g, depth=TABLE_DEPTH):
+    solver = tdct.SolverOptions(steps=STEPS)
+    return tdct.solve(
+        robot(), tdct.GeneralActuation([TENSION]), tdct.Loads(), scene=table(depth), gravity=(0.0, g, 0.0), solver=solver
+    )
 
 
 def contact_free(tip_force, g, steps=STEPS):
@@ -166,14 +176,7 @@ def test_tip_resting_on_a_plane_matches_the_reference(reference):
     """Acceptance 2: tdct_jax's frictionless contact solve finds the reference's tip (1e-6 m) and
     contact force (1e-6 N) at the tip, no force along the body, and the wrench on the table."""
     g, f, shape = reference
-    sol = tdct.solve(
-        robot(),
-        tdct.GeneralActuation([TENSION]),
-        tdct.Loads(),
-        scene=table(),
-        gravity=(0.0, g, 0.0),
-        solver=tdct.SolverOptions(steps=STEPS),
-    )
+    sol = on_the_table(g)
     tip = positions(shape, LENGTH)
     np.testing.assert_allclose(np.asarray(sol.position[-1]), tip, rtol=0, atol=TIP_ATOL)
     c = sol.contact
@@ -186,3 +189,24 @@ def test_tip_resting_on_a_plane_matches_the_reference(reference):
     np.testing.assert_allclose(np.asarray(c.normal)[-1, 0], [0.0, 1.0, 0.0], atol=1e-15)
     # the table carries -f along y at z_tip: moment about the origin (z_tip f, 0, 0)
     np.testing.assert_allclose(np.asarray(c.wrench)[0], [0.0, -f, 0.0, tip[2] * f, 0.0, 0.0], rtol=0, atol=FORCE_ATOL)
+
+
+@pytest.mark.slow
+def test_derivatives_in_the_table_height_match_the_references_differences(reference):
+    """Issue 26's derivatives through contact, against the independent reference: d(force, tip
+    z)/d(table depth) by jax.jacfwd of the contact solve (implicit, the contact set held) equal the
+    reference's central differences."""
+    g, _, _ = reference
+
+    def tdct_outputs(depth):
+        sol = on_the_table(g, depth)
+        return jnp.stack([sol.contact.force[-1, 0], sol.position[-1, 2]])
+
+    def reference_outputs(depth):
+        f, shape = resting_on_the_table(g, depth)
+        return np.array([f, shape.y[1, -1]])
+
+    exact = np.asarray(jax.jacfwd(tdct_outputs)(TABLE_DEPTH))
+    h = 1e-5
+    central = (reference_outputs(TABLE_DEPTH + h) - reference_outputs(TABLE_DEPTH - h)) / (2 * h)
+    np.testing.assert_allclose(exact, central, rtol=DERIVATIVE_RTOL)
