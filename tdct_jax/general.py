@@ -391,8 +391,9 @@ def by_interval(a, P: int):
     """Nodes of consecutive pieces (pieces, g + 1, ...), P breakpoint intervals' worth, as
     (P, steps + 1, ...): each interval's first node after its breakpoint's jump, each later
     piece's start its predecessor's end (before a contact force there)."""
-    a = a.reshape(P, -1, *a.shape[1:])
-    return jnp.concatenate([a[:, 0], a[:, 1:, 1:].reshape(P, -1, *a.shape[3:])], 1)
+    a = a.reshape(P, a.shape[0] // P, *a.shape[1:])
+    rest = a[:, 1:, 1:]
+    return jnp.concatenate([a[:, 0], rest.reshape(P, rest.shape[1] * rest.shape[2], *a.shape[3:])], 1)
 
 
 def closing(robot: GeneralRobot, act: GeneralActuation, load: Loads, pl: Plan, y: State, lengths, F_c, touch=None):
