@@ -610,6 +610,8 @@ def _contacts(sol, scene) -> dict:
 
 
 def _print_contacts(contacts: dict) -> None:
+    """The text output's lines for ``_contacts``: one per touching candidate, one per obstacle."""
+
     def mm(x):
         return ", ".join(f"{v:.3f}" for v in x)
 

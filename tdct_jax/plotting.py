@@ -273,7 +273,7 @@ def _draw_scene(ax, scene, cols, p):
             t, inward = np.array([-n2[1], n2[0]]) / np.linalg.norm(n2), -n2 / np.linalg.norm(n2)
             far = 1e5
             solid = [x0 + far * t, x0 - far * t, x0 - far * t + far * inward, x0 + far * t + far * inward]
-            ax.add_artist(Polygon(solid, closed=True, color=OBSTACLE, alpha=0.25, lw=0))  # outside the limits
+            ax.add_artist(Polygon(solid, closed=True, color=OBSTACLE, alpha=0.25, lw=0))  # add_artist: the limits ignore it
             ax.axline(x0, x0 + t, color=OBSTACLE, lw=1.5)
             label = _foot(p[:, list(cols)].mean(0), n2, c) + 0.05 * np.ptp(p, axis=0).max() * inward
         elif isinstance(o, (Sphere, Capsule)):
