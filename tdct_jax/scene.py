@@ -155,6 +155,8 @@ class Distance:
         return self.function(p, self.params)
 
 
+SCENES = Path(__file__).parent / "scenes"
+"""The example scene files shipped with the package (``table.toml``: a table and a ball on it)."""
 OBSTACLES = {"plane": Plane, "sphere": Sphere, "capsule": Capsule}
 """The obstacle kinds a scene file names (``kind = ...``); ``Distance`` is Python only."""
 
@@ -279,7 +281,10 @@ def scene_from_dict(table: dict, where: str = "the scene") -> Scene:
             obstacles.append(OBSTACLES[kind](**{f: item[f] for f in fields}, name=str(item.get("name", ""))))
         except ValueError as e:
             raise ValueError(f"{where}: obstacles[{i}]: {e}") from None
-    return Scene(tuple(obstacles), every=table.get("every", 1))
+    try:
+        return Scene(tuple(obstacles), every=table.get("every", 1))
+    except ValueError as e:
+        raise ValueError(f"{where}: {e}") from None
 
 
 def read_scene(path) -> Scene:
