@@ -62,8 +62,9 @@ CONTACT_TENSION = 6.0
 TABLE_HEIGHT = -0.04
 """The table's surface [m]: the plane y = TABLE_HEIGHT, solid below."""
 CONTACT_INSERTIONS = tuple(MM * d for d in range(0, 161, 10))
-CYLINDER = dict(a=(-0.05, -0.03, 0.07), b=(0.05, -0.03, 0.07), radius=0.015)
-"""A horizontal cylinder [m] under the body, across the bending plane, that the body bends over."""
+CYLINDER = dict(a=(-0.05, -0.03, 0.04), b=(0.05, -0.03, 0.04), radius=0.01)
+"""A horizontal cylinder [m] under the body near its base, across the bending plane: tendon 3 bends
+the body down over it."""
 CYLINDER_TENSION = 10.0
 """Sec. III.B calibrates on "five distinct tendon forces" on one tendon without listing them: ours."""
 
