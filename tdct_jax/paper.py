@@ -57,6 +57,7 @@ TABLE3_MASSES = tuple(G * m for m in (0, 20, 50))
 PAPER_BENDING_RANGE_DEG = (-57.1, 61.4)
 """Sec. III.B: tip bending angles over the Table III conditions."""
 CALIBRATION_TENSIONS = (2.0, 4.0, 6.0, 8.0, 10.0)
+"""Sec. III.B calibrates on "five distinct tendon forces" on one tendon without listing them: ours."""
 CONTACT_TENSION = 6.0
 """Beyond the paper (issue 26): the tension [N] on tendon 3 (body -y) that presses the tip on a table."""
 TABLE_HEIGHT = -0.04
@@ -66,7 +67,7 @@ CYLINDER = dict(a=(-0.05, -0.03, 0.04), b=(0.05, -0.03, 0.04), radius=0.01)
 """A horizontal cylinder [m] under the body near its base, across the bending plane: tendon 3 bends
 the body down over it."""
 CYLINDER_TENSION = 10.0
-"""Sec. III.B calibrates on "five distinct tendon forces" on one tendon without listing them: ours."""
+"""The tension [N] on tendon 3 that bends the body over ``CYLINDER``."""
 
 
 def tendon1(robot: Robot, tensions) -> np.ndarray:
