@@ -95,16 +95,25 @@ def interior_pieces(P: int, steps: int, g: int, every: int) -> np.ndarray:
     return nodes // g
 
 
-def fischer_burmeister(a, b):
-    """phi(a, b) = a + b - |(a, b)|: zero iff a >= 0, b >= 0 and a b = 0 (with a finite gradient,
-    1 in a and 0 in b, at a = b = 0)."""
-    return a + b - jnp.sqrt(a**2 + b**2 + 1e-300)
+SMOOTHING = (1e-3, 1e-5)
+"""mu of the smoothed solves that follow where plain Newton from the contact-free start fails
+(``shooting._root``), each from the last root, the exact one last: phi_mu = 0 iff a, b > 0 and
+a b = mu^2, a root near the exact one. Newton from the contact-free start can wander among
+contact sets: the paper robot bent onto a plane with a candidate every RK4 step failed after 306
+steps with the load continuation alone; with (1e-3,) the exact solve from the smoothed root still
+failed; with these it converges (benchmarks/contact_speed.py)."""
 
 
-def residual(touch: Candidates, F_c, L):
-    """The contact rows of the shooting residual, candidate by candidate, (n_c * n_o,)."""
+def fischer_burmeister(a, b, mu=0.0):
+    """phi(a, b) = a + b - sqrt(a^2 + b^2 + 2 mu^2): for mu = 0 zero iff a >= 0, b >= 0 and a b = 0
+    (with a finite gradient, 1 in a and 0 in b, at a = b = 0)."""
+    return a + b - jnp.sqrt(a**2 + b**2 + 2 * mu**2 + 1e-300)
+
+
+def residual(touch: Candidates, F_c, L, mu=0.0):
+    """The contact rows of the shooting residual, candidate by candidate, (n_c * n_o,), smoothed by mu."""
     a, b = touch.force / F_c, touch.gap / L
-    return jnp.where(touch.off[:, None], a, fischer_burmeister(a, b)).reshape(-1)
+    return jnp.where(touch.off[:, None], a, fischer_burmeister(a, b, mu)).reshape(-1)
 
 
 def at_start(scene, force, p, radius):

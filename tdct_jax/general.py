@@ -396,11 +396,12 @@ def by_interval(a, P: int):
     return jnp.concatenate([a[:, 0], rest.reshape(P, rest.shape[1] * rest.shape[2], *a.shape[3:])], 1)
 
 
-def closing(robot: GeneralRobot, act: GeneralActuation, load: Loads, pl: Plan, y: State, lengths, F_c, touch=None):
+def closing(robot: GeneralRobot, act: GeneralActuation, load: Loads, pl: Plan, y: State, lengths, F_c, touch=None, mu=0.0):
     """The scaled residual at the tip State y (before the jump at L) with the tendons' lengths:
     tip (6,), then per driven tendon phi(tau / F_c, (delta_shape - delta) / L) (``shoot``), then
     with a scene (``touch``: contact.Candidates, the last one the tip's, whose force is applied
-    here) per candidate and obstacle phi(lambda / F_c, gap / L); and each tendon's slack flag (n_t,)."""
+    here) per candidate and obstacle phi_mu(lambda / F_c, gap / L) (contact.py); and each
+    tendon's slack flag (n_t,)."""
     L = robot.length
     N_L, M_L = y.N + pl.dN[-1], y.M + pl.dM[-1]
     if touch is not None:
@@ -414,15 +415,15 @@ def closing(robot: GeneralRobot, act: GeneralActuation, load: Loads, pl: Plan, y
         res.append(contact.fischer_burmeister(a, b))
         slack = slack.at[i].set(b > a)
     if touch is not None:
-        res.append(contact.residual(touch, F_c, L))
+        res.append(contact.residual(touch, F_c, L, mu))
     return jnp.concatenate(res), slack
 
 
-def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solver, x, F_c, path: bool = False):
+def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solver, x, F_c, path: bool = False, mu=0.0):
     """Integrates every interval from the scaled unknowns x to the tip: x[:6] the base wrench
     (N(0), M(0)), x[6:6 + n_d] the tensions of the displacement-driven tendons (act.driven) over
     F_c, then with ``load.scene`` the contact forces lambda / F_c, candidate by candidate, each
-    with one per obstacle (contact.py).
+    with one per obstacle (contact.py; their rows smoothed by mu, 0: exact).
 
     Returns:
         The scaled residual: tip (6,), then per driven tendon phi(tau / F_c, (delta_shape -
@@ -453,7 +454,7 @@ def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solv
         # a candidate inside a zero-length interval shares its point with the next one: off
         tip_gap = scene.distances(end.y.p) - pl.intervals.radius[-1]
         touch = contact.Candidates(lam, jnp.concatenate([starts.gap[where], tip_gap[None]]), jnp.append(ps.h[where] == 0, False))
-    res, slack = closing(robot, act, load, pl, end.y, end.l, F_c, touch)
+    res, slack = closing(robot, act, load, pl, end.y, end.l, F_c, touch, mu)
     if not path:
         return res, end.y
     found = None

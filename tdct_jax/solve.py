@@ -134,7 +134,7 @@ def _assemble_general(robot, act, load, gravity, solver, ys, res, info) -> Solut
     displacements = general.displacements(robot, act, lengths)
     if act.driven:
         displacements = displacements.at[np.asarray(act.driven)].set(act.displacements)
-    result = info.result if touching is None else status.contact_result(info.result, touching.gap, solver.tol * robot.length)
+    result = info.result if touching is None else status.contact_result(info.result, touching.gap, 2 * solver.tol * robot.length)
     return GeneralSolution(
         s, y.p, y.R, n, m, y.N, y.M, v, u, res, jnp.max(jnp.abs(res)), info.iterations, info.stages, result, touching,
         tensions, displacements, slack,

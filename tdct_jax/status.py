@@ -27,8 +27,9 @@ unloaded tip stays below the height (mass 0; ``throw`` raises, there is no capac
 CONTACT_UNCONVERGED = 6
 """With a scene: Newton found no contact set (forces and gaps) that meets the tolerance."""
 PENETRATION = 7
-"""With a scene: converged, but the body lies inside an obstacle by more than tol x L at a
-contact candidate."""
+"""With a scene: converged, but the body lies inside an obstacle by more than 2 tol x L at a
+contact candidate (each candidate's Fischer-Burmeister row within tol holds its gap above -tol x L
+to first order: the check guards what is reported, not between candidates)."""
 
 NAMES = {
     SUCCESS: "converged",
@@ -66,7 +67,7 @@ _ADVICE = {
         "or pushing it past a snap): {contact_advice}."
     ),
     PENETRATION: (
-        "converged, but the body lies inside an obstacle by more than tol x L at a contact candidate; tighten tol or "
+        "converged, but the body lies inside an obstacle by more than 2 tol x L at a contact candidate; tighten tol or "
         "check that the obstacles leave the robot room (a robot pinned between obstacles cannot satisfy them all)."
     ),
 }
@@ -172,7 +173,7 @@ def _raise_first(result: np.ndarray, what: str, context: dict) -> None:
 
 def contact_result(result, gap, depth):
     """A solve's code with a scene: a Newton failure (its limit, a stall) is CONTACT_UNCONVERGED;
-    a converged one with some gap below -depth [m] (tol x L) is PENETRATION."""
+    a converged one with some gap below -depth [m] (2 tol x L) is PENETRATION."""
     failed = (result == NEWTON_LIMIT) | (result == CONTINUATION_EXHAUSTED)
     inside = (result == SUCCESS) & (jnp.min(gap) < -depth)
     return jnp.where(failed, CONTACT_UNCONVERGED, jnp.where(inside, PENETRATION, result)).astype(result.dtype)
