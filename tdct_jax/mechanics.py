@@ -184,7 +184,9 @@ def pose_jacobian(robot, act, load, gravity, guess, solver, wrt):
 _pose_jacobian = jax.jit(pose_jacobian, static_argnums=(6,))
 
 
-def kinematic_jacobian(robot, act, load=None, *, gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True):
+def kinematic_jacobian(
+    robot, act, load=None, *, gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True, scene=None
+):
     """d(tip position [m], tip rotation vector [rad]) / d(tensions [N], insertion [m]), shape (6, n_t + 1).
 
     The last column is the tube insertion depth, a real differentiable input (one-sided at d = 0
@@ -194,23 +196,39 @@ def kinematic_jacobian(robot, act, load=None, *, gravity=STANDARD_GRAVITY, solve
     tendon's tension [N] in the robot's order, then each displacement-driven tendon's
     displacement [m] in ``driven`` order, then each tube's insertion [m]. A driven tendon's
     tension column is zero: its tension follows from its displacement.
+
+    With a ``scene`` (as for ``tdct.solve``) the contact set is held: the touching candidates stay
+    on their obstacles, and the columns are a GeneralActuation's (a Robot is solved as its
+    ``to_general()``).
     """
-    return _checked(_pose_jacobian, solve_arguments(robot, act, load, gravity, guess, solver), throw, "actuation")[0]
+    args = solve_arguments(robot, act, load, gravity, guess, solver, scene)
+    return _checked(_pose_jacobian, args, throw, "actuation")[0]
 
 
 def parameter_jacobian(
-    robot, act, load=None, *, params=("E_silicone",), gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True
+    robot,
+    act,
+    load=None,
+    *,
+    params=("E_silicone",),
+    gravity=STANDARD_GRAVITY,
+    solver=DEFAULT_SOLVER,
+    guess=None,
+    throw=True,
+    scene=None,
 ):
     """d(tip position, tip rotation vector) / d(fields named in ``params``), (6, len(params)).
 
     Field names as in ``fields.py``: a Robot's "E_silicone", ..., a GeneralRobot's
     "sections[*].E", "tendons[0].offset", ... ("[*]": one value shared by every item). Units
-    follow the fields (e.g. m/Pa for E_silicone). Arguments as for ``compliance``.
+    follow the fields (e.g. m/Pa for E_silicone). Arguments as for ``compliance``; with a
+    ``scene`` a Robot is solved as its ``to_general()``, so ``params`` name the general fields.
     """
+    args = solve_arguments(robot, act, load, gravity, guess, solver, scene)
+    robot = args[0]
     check_params(robot, params)
     for p in params:
         fields.value(robot, p)  # set, and for "[*]" one value
-    args = solve_arguments(robot, act, load, gravity, guess, solver)
     return _checked(_pose_jacobian, args, throw, tuple(params))[0]
 
 
