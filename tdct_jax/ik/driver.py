@@ -15,9 +15,9 @@ from .. import status
 from ..inputs import GeneralActuation
 from ..shooting import RootInfo, at_root, force_scale, root, tip_compliance, unscaled, unset_info
 from ..solve import solution_and_compliance, solution_at
-from .evaluation import evaluate
+from .evaluation import evaluate, evaluate_at
 from .objectives import objective_value
-from .optimise import optimise
+from .optimise import SQPState, sqp_start, sqp_step
 from .problem import IKResult, Plan, Problem, _wrench, actuation_of, pose_errors
 from .reach import Model, Reach, _lazily, _usable, _where, no_model, reach_augmented, reach_nested
 from .starts import STARTS, nearest_on_grid, starts
@@ -34,13 +34,14 @@ class Found(NamedTuple):
 
 
 REACH, OPTIMISE, CLOSE, DONE = range(4)
-"""``find``'s passes: phase 1 from one start, phase 2 (with an objective), the closing forward
-solve at the answer, and the end."""
+"""``find``'s passes: phase 1 from one start, a step of phase 2 (with an objective), the closing
+forward solve at the answer, and the end."""
 
 
 class Tried(NamedTuple):
     """``find``'s loop: its pass (REACH ...), how many starts were tried, the best end so far, the
-    steps taken over all of them, and the last forward solve (scaled unknowns, RootInfo)."""
+    steps taken over all of them, the last forward solve (scaled unknowns, RootInfo) and phase 2's
+    state (None without an objective)."""
 
     phase: jax.Array
     k: jax.Array
@@ -48,6 +49,7 @@ class Tried(NamedTuple):
     steps: jax.Array
     x: jax.Array
     info: RootInfo
+    sqp: SQPState | None
     i: jax.Array  # passes so far
 
 
@@ -56,13 +58,14 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
     """The IK solution in scaled inputs (see the module docstring), from v0 (and the converged or
     NaN base wrench there; with a usable ``model`` at v0, a warm update from it), then from the
     grid start (``nearest_on_grid``) and ``starts`` until one reaches (the nearest pose of them
-    all otherwise), then phase 2, then the forward solve at the answer: one loop whose passes
-    share one forward solve in the compiled program. Its derivatives by implicit
+    all otherwise), then phase 2 a step a pass, then the forward solve at the answer: one loop
+    whose passes share one forward solve in the compiled program. Its derivatives by implicit
     differentiation (``_find_jvp``)."""
     candidates = starts(v0, prob, plan)
     cold = no_model(prob, plan)
     warm = _usable(model)
     closing = prob.solver.intervals == 1  # multiple shooting: ``_solve_ik`` solves at the answer itself
+    shared = not callable(plan.objective)  # a user's objective: phase 2 solves through the Solution
 
     def reach(v, wrench, first):
         if plan.method == "nested":
@@ -75,15 +78,19 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
         return jnp.where(more, REACH, jnp.where(best.code == status.SUCCESS, ends, CLOSE))
 
     def step(c):
-        phase, k, best = c.phase, c.k, c.best
-        reaching = phase == REACH
+        phase, k, best, sqp = c.phase, c.k, c.best, c.sqp
+        reaching, optimising = phase == REACH, phase == OPTIMISE
         grid = _lazily(reaching & (k == 1), lambda: nearest_on_grid(prob, plan), v0)
-        v = jnp.where(phase == CLOSE, best.v, jnp.where(k == 1, grid, candidates[jnp.clip(k - 1, 0, len(candidates) - 1)]))
-        guess = jnp.where(phase == CLOSE, best.wrench, jnp.where(k == 0, wrench0, jnp.nan))
+        v = jnp.where(k == 1, grid, candidates[jnp.clip(k - 1, 0, len(candidates) - 1)])
+        guess = jnp.where(k == 0, wrench0, jnp.nan)
+        if sqp is not None:  # phase 2's trial point
+            v, guess = jnp.where(optimising, sqp.v + sqp.s, v), jnp.where(optimising, sqp.ev.wrench, guess)
+        v, guess = jnp.where(phase == CLOSE, best.v, v), jnp.where(phase == CLOSE, best.wrench, guess)
         problem = (prob.robot, actuation_of(v, prob, plan), prob.load, prob.gravity)
         # a warm update's wrench0 is the converged solve at v0
         skip = warm & (k == 0) & reaching
-        x, info = _lazily((reaching & ~skip) | (phase == CLOSE), lambda: root(*problem, guess, prob.solver), (c.x, c.info))
+        solving = (reaching & ~skip) | (phase == CLOSE) | (optimising & shared)
+        x, info = _lazily(solving, lambda: root(*problem, guess, prob.solver), (c.x, c.info))
         wrench = jnp.where(skip, wrench0, unscaled(prob.robot, x, force_scale(*problem)))
         code = jnp.where(skip, status.SUCCESS, info.result).astype(jnp.int32)
 
@@ -98,15 +105,23 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
 
         best, steps = _lazily(reaching, reached, (best, c.steps))
         k = jnp.where(reaching, k + 1, k)
-        phase = jnp.where(reaching, after_reach(k, best), jnp.where(phase == CLOSE, DONE, CLOSE if closing else DONE))
-        if plan.objective is not None:
-            o = _lazily(c.phase == OPTIMISE, lambda: optimise(best.v, best.wrench, prob, plan), best._replace(model=None))
-            use = (c.phase == OPTIMISE) & (best.code == status.SUCCESS)
-            best = _where(use, Reach(o.v, o.wrench, o.e, best.steps, o.code, best.model), best)
-            steps = jnp.where(use, steps + o.steps, steps)
+        phase = jnp.where(reaching, after_reach(k, best), jnp.where(phase == CLOSE, DONE, phase))
+        if sqp is not None:
+
+            def optimised():
+                trial = evaluate_at(v, x, info, prob, plan) if shared else evaluate(v, guess, prob, plan)
+                return sqp_step(sqp, trial, prob)
+
+            sqp = _lazily(optimising, optimised, sqp)
+            # phase 2 starts where phase 1 reached the target
+            sqp = _where(reaching & (phase == OPTIMISE), sqp_start(best.v, best.wrench, prob), sqp)
+            ended = optimising & sqp.done
+            best = _where(ended, sqp.result(best.steps)._replace(model=best.model), best)
+            steps = jnp.where(ended, steps + sqp.it - 1, steps)
+            phase = jnp.where(ended, CLOSE, phase)
         if not closing:
             phase = jnp.where(phase == CLOSE, DONE, phase)
-        return Tried(phase, k, best, steps, x, info, c.i)
+        return Tried(phase, k, best, steps, x, info, sqp, c.i)
 
     def body(c):  # a pass once DONE costs one test
         return _lazily(c.phase != DONE, lambda: step(c), c)._replace(i=c.i + 1)
@@ -114,11 +129,14 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
     n = jnp.shape(wrench0)[0]
     none = Reach(v0, jnp.full(n, jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT), cold)
     first = after_reach(0, none)
-    init = Tried(jnp.where(closing | (first != CLOSE), first, DONE), 0, none, 0, jnp.zeros(n), unset_info(n), 0)
-    # the loop runs n_starts + 2 passes, the last ones no-ops once the phases are DONE: a bound that
-    # XLA finds without tracing the passes' data through the body (which it does for a loop whose
-    # condition reads the body's results, at a cost that grows with the body's size)
-    tried = lax.while_loop(lambda c: c.i < n_starts + 2, body, init)
+    sqp = None if plan.objective is None else sqp_start(v0, jnp.full(n, jnp.nan), prob)
+    init = Tried(jnp.where(closing | (first != CLOSE), first, DONE), 0, none, 0, jnp.zeros(n), unset_info(n), sqp, 0)
+    # the loop runs a pass for every start, phase 2's steps and the closing solve, the last ones
+    # no-ops once the phases are DONE: a bound that XLA finds without tracing the passes' data
+    # through the body (which it does for a loop whose condition reads the body's results, at a
+    # cost that grows with the body's size)
+    passes = n_starts + 1 + (0 if plan.objective is None else prob.options.max_steps + 1)
+    tried = lax.while_loop(lambda c: c.i < passes, body, init)
     r = tried.best
     return Found(r.v, r.wrench, tried.steps, r.code, r.model, tried.x, tried.info)
 

@@ -11,7 +11,7 @@ from jax import lax
 
 from .. import general
 from ..inputs import GeneralActuation
-from ..shooting import at_root, force_scale, root, scaled, shoot, tip_compliance, unscaled
+from ..shooting import RootInfo, at_root, force_scale, root, scaled, shoot, tip_compliance, unscaled
 from ..solve import solution_and_compliance
 from .objectives import objective_value
 from .problem import Plan, Problem, _wrench, actuation_of, task_residual
@@ -42,10 +42,15 @@ def evaluate(v, guess, prob: Problem, plan: Plan) -> Evaluation:
     pass over the shooting unknowns x and v together at the root (``_one_pass``)."""
     if callable(plan.objective):
         return _through_solution(v, guess, prob, plan)
-    act = actuation_of(v, prob, plan)
-    problem = (prob.robot, act, prob.load, prob.gravity)
+    problem = (prob.robot, actuation_of(v, prob, plan), prob.load, prob.gravity)
+    return evaluate_at(v, *root(*lax.stop_gradient(problem), guess, prob.solver), prob, plan)
+
+
+def evaluate_at(v, x, info: RootInfo, prob: Problem, plan: Plan) -> Evaluation:
+    """``evaluate`` (not for a user's objective) at the root x at v that ``root`` found elsewhere
+    (its RootInfo ``info``), e.g. by ``find``'s one forward solve."""
+    problem = (prob.robot, actuation_of(v, prob, plan), prob.load, prob.gravity)
     F_c = force_scale(*problem)
-    x, info = root(*lax.stop_gradient(problem), guess, prob.solver)
     # x with root's implicit derivatives, for the derivatives of this evaluation (``_find_jvp``)
     x = at_root(*problem, prob.solver, x, info.jacobians[0])
     e, G, phi, dphi = _one_pass(x, v, F_c, prob, plan)
@@ -56,19 +61,26 @@ def _one_pass(x, v, F_c, prob: Problem, plan: Plan):
     """(e, G, phi, dphi) at the root x at v from one forward-mode pass of the shooting residual r
     and the tip pose over z = (x, v), with x eliminated by the implicit function theorem:
     dz/dv = (-(dr/dx)^-1 dr/dv, I). The stiffness objective's compliance (eq. 41) comes from the
-    same pass's columns in x; its derivative in v, from a second pass, d(r, tip)/dx differentiated
-    along dz/dv."""
+    same pass's columns in x; its derivative in v from the same pass too, taken to second order:
+    d(r, tip)/dx differentiated in z, then along dz/dv (one copy of the integration in the
+    compiled program, not two)."""
     n, k = x.shape[0], v.shape[0]
+    stiffness = plan.objective == "stiffness"
 
     def tip(z):
         r, y = shoot(prob.robot, actuation_of(z[n:], prob, plan), prob.load, prob.gravity, prob.solver, z[:n], F_c)
         return r, y.p, y.R
 
-    def in_x(z):
-        return jax.jacfwd(lambda x: tip(jnp.concatenate([x, z[n:]])))(z[:n])
+    def in_x(z):  # (tip, d tip / dx) at z
+        Jx, out = jax.jacfwd(lambda x: (lambda o: (o, o))(tip(jnp.concatenate([x, z[n:]]))), has_aux=True)(z[:n])
+        return out, Jx
 
     z = jnp.concatenate([x, v])
-    (J_r, J_p, J_R), (_, p, R) = jax.jacfwd(lambda z: (lambda o: (o, o))(tip(z)), has_aux=True)(z)
+    if stiffness:
+        (J_z, dJx_dz), ((_, p, R), Jx) = jax.jacfwd(lambda z: (lambda o: (o, o))(in_x(z)), has_aux=True)(z)
+        J_r, J_p, J_R = J_z
+    else:
+        (J_r, J_p, J_R), (_, p, R) = jax.jacfwd(lambda z: (lambda o: (o, o))(tip(z)), has_aux=True)(z)
     D = jnp.concatenate([-jnp.linalg.solve(J_r[:, :n], J_r[:, n:]), jnp.eye(k)])
 
     def each(f, primals, tangents, axes):  # f's derivative along every column of the tangents
@@ -80,7 +92,6 @@ def _one_pass(x, v, F_c, prob: Problem, plan: Plan):
     e, G = task(p, R), each(task, (p, R), (J_p @ D, J_R @ D), (1, 2))
     if plan.objective is None:
         return e, G, jnp.zeros(()), jnp.zeros(k)
-    stiffness = plan.objective == "stiffness"
 
     def objective(z, R, Jx):
         act = actuation_of(z[n:], prob, plan)
@@ -88,7 +99,7 @@ def _one_pass(x, v, F_c, prob: Problem, plan: Plan):
             act = general.with_driven(act, z[:n], F_c)
         return objective_value(None, tip_compliance(prob.robot, R, *Jx, F_c) if stiffness else None, act, prob, plan)
 
-    Jx, dJx = ((J_r[:, :n], J_p[:, :n], J_R[..., :n]), each(lambda z: in_x(z), (z,), (D,), (1,))) if stiffness else ((), ())
+    Jx, dJx = (Jx, jax.tree.map(lambda a: a @ D, dJx_dz)) if stiffness else ((), ())
     primals = (z, R, Jx)
     dphi = each(objective, primals, (D, J_R @ D, dJx), (1, 2, jax.tree.map(lambda _: -1, Jx)))
     return e, G, objective(*primals), dphi
