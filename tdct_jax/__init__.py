@@ -16,6 +16,7 @@ from .calibrate_rig import calibrate_rig as calibrate_rig  # noqa: E402
 from .calibrate_rig import predict as predict  # noqa: E402
 from .calibrate_rig import synthesize_recording as synthesize_recording  # noqa: E402
 from .checks import UnitWarning as UnitWarning  # noqa: E402
+from .contact import Contact as Contact  # noqa: E402
 from .data import Experiment as Experiment  # noqa: E402
 from .data import read_experiment as read_experiment  # noqa: E402
 from .data import read_experiments as read_experiments  # noqa: E402

@@ -25,6 +25,7 @@ from .loads import STANDARD_GRAVITY, Actuation, TipLoad
 from .mechanics import compliance, compliance_ellipsoid
 from .options import MAX_ITER, STEPS, SolverOptions
 from .robot import CalibrationWarning, Robot
+from .scene import read_scene
 from .solve import check_solution, solve
 from .status import ConvergenceError
 
@@ -242,6 +243,12 @@ def _parser() -> argparse.ArgumentParser:
     p = verbs.add_parser("solve", parents=[common], help="solve one static shape and print the tip pose", epilog=LISTS_HELP)
     p.add_argument("--plot", metavar="shape.png", help="save a side view and a 3D view of the shape")
     p.add_argument("--csv", metavar="shape.csv", help="save the shape as s_mm,x_mm,y_mm,z_mm")
+    p.add_argument(
+        "--scene",
+        metavar="scene.toml",
+        help="obstacles the robot rests on or presses against, SI units (docs/contact.md): frictionless contact "
+        "along the body and at the tip, the contacts printed and drawn",
+    )
     c = verbs.add_parser(
         "compliance", parents=[common], help="exact tip compliance matrix (eq. 41) and its ellipsoid", epilog=LISTS_HELP
     )
@@ -491,6 +498,8 @@ def _conditions(args, act) -> str:
         parts.append(f"tip force ({', '.join(f'{f:g}' for f in args.tip_force)}) N")
     if args.point_load:
         parts.append(f"{len(args.point_load)} point load(s)")
+    if getattr(args, "scene", None):
+        parts.append(f"scene {Path(args.scene).name}")
     return ", ".join(parts) or "no load"
 
 
@@ -522,7 +531,16 @@ def _compliance_command(args) -> int:
 
 def _solve_command(args) -> int:
     robot, act, load, options = _inputs(args)
-    sol = solve(robot, act, load, **options, throw=False)
+    scene = None
+    if args.scene:
+        scene = read_scene(args.scene)
+        if isinstance(robot, Robot):  # contact is solved on the general description (solve does the same)
+            robot, act, load = robot.to_general(), GeneralActuation.of(act, 1), Loads.of(load)
+        try:
+            scene.check_base(float(robot.sections[0].outer_diameter) / 2)
+        except ValueError as e:
+            raise ValueError(f"scene file {args.scene}: {e}") from None
+    sol = solve(robot, act, load, **options, scene=scene, throw=False)
     tip_mm = np.asarray(sol.tip_position) * 1e3
     angle = float(np.degrees(sol.tip_angle))
     converged, res, iters = bool(sol.converged), float(sol.residual_norm), int(sol.iterations)
@@ -542,6 +560,7 @@ def _solve_command(args) -> int:
             residual_norm=res,
             iterations=iters,
             **tendons,
+            **({} if scene is None else _contacts(sol, scene)),
             shape=shape,
         )
         print(json.dumps(out))
@@ -554,6 +573,8 @@ def _solve_command(args) -> int:
             print(f"tensions [N]:      {', '.join(f'{t:.4f}' for t in tendons['tensions_N'])}")
             print(f"displacements [mm]: {', '.join(f'{d:.4f}' for d in tendons['displacements_mm'])}")
             print(f"slack tendons:     {', '.join(slack) or 'none'}")
+        if scene is not None:
+            _print_contacts(_contacts(sol, scene))
     if args.csv:
         table = np.column_stack([np.asarray(sol.s), np.asarray(sol.position)]) * 1e3
         np.savetxt(args.csv, table, delimiter=",", header="s_mm,x_mm,y_mm,z_mm", comments="", fmt="%.9g")
@@ -561,11 +582,47 @@ def _solve_command(args) -> int:
         from .plotting import plot_robot, plot_shape
 
         if isinstance(robot, GeneralRobot):
-            plot_robot(sol, robot, act, load, args.plot, title=_conditions(args, act))
+            plot_robot(sol, robot, act, Loads.of(load).with_scene(scene), args.plot, title=_conditions(args, act))
         else:
             plot_shape(sol, act.insertion, args.plot, title=_conditions(args, act))
     check_solution(sol, options["solver"], True)
     return 0
+
+
+def _contacts(sol, scene) -> dict:
+    """The touching candidates (arc length and centreline point in mm, the obstacle's normal, the
+    normal force in N, the obstacle's name), candidate by candidate from the base, and the wrench
+    the robot exerts on each obstacle (force in N, moment about the base in N m)."""
+    c = sol.contact
+    touching = [
+        dict(
+            obstacle=scene.names[o],
+            s_mm=1e3 * float(c.s[j]),
+            position_mm=(1e3 * np.asarray(c.position[j])).tolist(),
+            normal=np.asarray(c.normal[j, o]).tolist(),
+            force_N=float(c.force[j, o]),
+        )
+        for j, o in zip(*np.nonzero(np.asarray(c.active)), strict=True)
+    ]
+    wrench = np.asarray(c.wrench)
+    on = [dict(obstacle=n, force_N=w[:3].tolist(), moment_N_m=w[3:].tolist()) for n, w in zip(scene.names, wrench, strict=True)]
+    return dict(contacts=touching, obstacles=on)
+
+
+def _print_contacts(contacts: dict) -> None:
+    """The text output's lines for ``_contacts``: one per touching candidate, one per obstacle."""
+
+    def mm(x):
+        return ", ".join(f"{v:.3f}" for v in x)
+
+    lines = [
+        f"{c['obstacle']} at s = {c['s_mm']:.1f} mm, ({mm(c['position_mm'])}) mm: {c['force_N']:.4f} N"
+        for c in contacts["contacts"]
+    ]
+    print(f"contacts:          {(chr(10) + ' ' * 19).join(lines) or 'none'}")
+    for o in contacts["obstacles"]:
+        force, moment = ", ".join(f"{f:.4f}" for f in o["force_N"]), ", ".join(f"{m:.5f}" for m in o["moment_N_m"])
+        print(f"{'on ' + o['obstacle'] + ':':<19}force ({force}) N, moment about the base ({moment}) N m")
 
 
 def _reproduce_command(args) -> int:

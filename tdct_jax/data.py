@@ -485,7 +485,7 @@ def stack(experiments: Sequence[Experiment]) -> Experiment:
         return np.stack([np.asarray(get(e), dtype=float) for e in experiments])
 
     def leaves(items, cls):
-        names = [f.name for f in dataclasses.fields(cls) if not f.metadata.get("static")]
+        names = [f.name for f in dataclasses.fields(cls) if not f.metadata.get("static") and f.name != "scene"]
         return {k: np.stack([np.asarray(getattr(x, k), dtype=float) for x in items]) for k in names}
 
     if all(general):

@@ -30,7 +30,7 @@ from .loads import STANDARD_GRAVITY, gravity_vector
 from .mechanics import positions_at
 from .options import DEFAULT_SOLVER, SolverOptions
 from .robot import Robot
-from .solve import solve
+from .solve import solve, with_scene
 from .tree import pytree
 
 
@@ -140,6 +140,7 @@ def estimate_force(
     gravity=STANDARD_GRAVITY,
     solver: SolverOptions = DEFAULT_SOLVER,
     throw: bool = True,
+    scene=None,
 ) -> ForceEstimate:
     """Estimates one unknown point force (location and vector) on the body from a measurement.
 
@@ -160,6 +161,8 @@ def estimate_force(
         gravity: world gravity [m/s^2] (None: none).
         solver: SolverOptions for every solve.
         throw: raise ConvergenceError when the fit does not converge.
+        scene: known obstacles (as for ``tdct.solve``): the unknown force acts besides their
+            contact forces.
 
     Returns:
         ForceEstimate.
@@ -183,6 +186,8 @@ def estimate_force(
     else:
         raise ValueError(f"measured must be a tdct.Experiment (a shape) or a TipPose, got {type(measured).__name__}")
     act, load = GeneralActuation.of(act, general.n_tubes), Loads.of(load)
+    if scene is not None:
+        general, act, load = with_scene(general, act, load, scene, solver)
     L = float(general.length)
     args = (
         general,

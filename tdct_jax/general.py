@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from . import contact
 from .checks import check_range, is_concrete
 from .description import GeneralRobot, channelled_second_moments, is_concrete_tree, section_area
 from .inputs import GeneralActuation, Loads
@@ -48,7 +49,8 @@ class Interval(NamedTuple):
     """Segment parameters of one interval (a leading axis over intervals in ``Plan``).
 
     K_se (3,) [N], K_bt (3,) [N m^2], rho [kg/m], backbone (1.0: a tube inside), tau (n_t,) [N]
-    (zero beyond each anchor), present (n_t,) (1.0 before each anchor)."""
+    (zero beyond each anchor), present (n_t,) (1.0 before each anchor), radius: the body's outer
+    radius [m] (contact gaps)."""
 
     K_se: jax.Array
     K_bt: jax.Array
@@ -56,6 +58,7 @@ class Interval(NamedTuple):
     backbone: jax.Array
     tau: jax.Array
     present: jax.Array
+    radius: jax.Array
 
 
 class Plan(NamedTuple):
@@ -125,7 +128,11 @@ def interval_parameters(robot: GeneralRobot, act: GeneralActuation, k, rank: Ran
         A = section_area(sec, jnp.sum(through))
         I_x, I_y = channelled_second_moments(sec.outer_diameter, sec.inner_diameter, sec.tendon_channel_diameter, r, through)
         G = sec.E / (2 * (1 + sec.nu))
-        props.append(jnp.stack([G * A, G * A, sec.E * A, sec.E * I_x, sec.E * I_y, G * (I_x + I_y), sec.density * A]))
+        props.append(
+            jnp.stack(
+                [G * A, G * A, sec.E * A, sec.E * I_x, sec.E * I_y, G * (I_x + I_y), sec.density * A, sec.outer_diameter / 2]
+            )
+        )
     p = jnp.stack(props)[idx]
     if robot.tubes:
         inside = rank.tubes > k
@@ -135,7 +142,8 @@ def interval_parameters(robot: GeneralRobot, act: GeneralActuation, k, rank: Ran
     else:
         EI = rho_t = backbone = jnp.zeros(())
     tau = jnp.where(present, jnp.asarray(act.tensions, float), 0.0)
-    return Interval(p[:3], jnp.stack([p[3] + EI, p[4] + EI, p[5]]), p[6] + rho_t, backbone, tau, present.astype(float))
+    K_bt = jnp.stack([p[3] + EI, p[4] + EI, p[5]])
+    return Interval(p[:3], K_bt, p[6] + rho_t, backbone, tau, present.astype(float), p[7])
 
 
 class Ranks(NamedTuple):
@@ -224,9 +232,10 @@ def _mass_moments(robot: GeneralRobot, act: GeneralActuation):
     return m0, m1
 
 
-def straight_rod(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, F_c):
+def straight_rod(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, F_c, steps: int | None = None):
     """Scaled base unknowns of the straight rod: every load's resultant exactly, its moment about
-    the base to first order (the moment arms of the undeformed robot)."""
+    the base to first order (the moment arms of the undeformed robot); with a scene (``steps``,
+    RK4 steps per breakpoint interval, given) the contact forces follow, all zero."""
     L = robot.length
     m0, m1 = _mass_moments(robot, act)
     N0 = load.tip_force + gravity * m0
@@ -236,7 +245,8 @@ def straight_rod(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravit
     arms = s_p[:, None] * E3[None]
     M0 = M0 + jnp.sum(load.point_moment + jnp.cross(arms, load.point_force), 0) + jnp.cross(E3, load.distributed_force) * L**2 / 2
     guesses = jnp.asarray(act.tensions, float)[np.asarray(act.driven, int)]  # the driven tendons' given tensions
-    return jnp.concatenate([N0 / F_c, M0 / (F_c * L), guesses / F_c])
+    forces = jnp.zeros(0 if steps is None else contact.n_unknowns(robot, load, steps))  # contact free
+    return jnp.concatenate([N0 / F_c, M0 / (F_c * L), guesses / F_c, forces])
 
 
 def _segment(robot: GeneralRobot, P: Interval, s) -> Segment:
@@ -268,10 +278,10 @@ def displacements(robot: GeneralRobot, act: GeneralActuation, lengths):
 
 
 def with_driven(act: GeneralActuation, x, F_c) -> GeneralActuation:
-    """The actuation with the displacement-driven tendons' tensions taken from the unknowns x[6:]."""
+    """The actuation with the displacement-driven tendons' tensions taken from the unknowns x[6:6 + n_d]."""
     if not act.driven:
         return act
-    tensions = jnp.asarray(act.tensions, float).at[np.asarray(act.driven)].set(x[6:] * F_c)
+    tensions = jnp.asarray(act.tensions, float).at[np.asarray(act.driven)].set(x[6 : 6 + len(act.driven)] * F_c)
     return GeneralActuation._rebuild(tensions, act.insertions, act.displacements, act.driven)
 
 
@@ -306,13 +316,15 @@ def check_intervals(robot: GeneralRobot, load: Loads, solver) -> None:
         )
 
 
-def pieces(pl: Plan, steps: int, K: int) -> tuple[Pieces, int]:
+def pieces(pl: Plan, steps: int, K: int, every: int | None = None) -> tuple[Pieces, int]:
     """The P breakpoint intervals' P steps RK4 steps as K shooting intervals of c = P steps / K
     steps each: pieces of g = gcd(c, steps) steps (each inside one breakpoint interval), shaped
-    (K, c / g, ...), and g. The jump of each breakpoint goes with the first piece after it."""
+    (K, c / g, ...), and g; with ``every`` (contact candidates every ``every`` steps) g also
+    divides it, so that each candidate is a piece start. The jump of each breakpoint goes with
+    the first piece after it."""
     P = pl.b.size - 1
     c = P * steps // K
-    g = np.gcd(c, steps)
+    g = np.gcd(c, steps) if every is None else np.gcd(np.gcd(c, steps), every)
     per = steps // g  # pieces per breakpoint interval
     h = (pl.b[1:] - pl.b[:-1]) / steps
     first = (np.arange(per) == 0)[None, :, None]
@@ -330,11 +342,16 @@ def pieces(pl: Plan, steps: int, K: int) -> tuple[Pieces, int]:
     return jax.tree.map(lambda a: a.reshape(K, c // g, *a.shape[1:]), ps), int(g)
 
 
-def integrate(robot: GeneralRobot, load: Loads, gravity, ps: Pieces, c: Carry, steps: int, path: bool = False):
+def integrate(robot: GeneralRobot, load: Loads, gravity, ps: Pieces, c: Carry, steps: int, path: bool = False, forces=None):
     """RK4 over consecutive pieces of ``steps`` steps (``pieces``, one shooting interval), each
     after its jump, from the Carry c; tendon lengths where c.l is not None, arc length for helical
     tendons. Returns the end Carry and the nodes (with ``path``: (pieces, steps + 1, ...), each
-    piece's first node after its jump)."""
+    piece's first node after its jump).
+
+    ``forces``: each piece's contact forces against ``load.scene``'s obstacles [N], (pieces,
+    n_o), or None (no contact): at its start the piece's N jumps by the point force -sum_o
+    lambda_o n_o(p) (contact.py), and the nodes come with each piece start's Starts (position and
+    gaps to the obstacles)."""
     helical, lengths = is_helical(robot), c.l is not None
     f_d = load.distributed_force
     r_fixed = None if helical else tendon_positions(robot, 0.0)[0]
@@ -356,52 +373,97 @@ def integrate(robot: GeneralRobot, load: Loads, gravity, ps: Pieces, c: Carry, s
     def project(c: Carry) -> Carry:
         return c._replace(y=c.y._replace(R=orthonormalize(c.y.R)))
 
-    def piece(c: Carry, k: Pieces):
+    def piece(c: Carry, kf):
+        k, f = kf
         y = c.y._replace(N=c.y.N + k.dN, M=c.y.M + k.dM)
+        starts = None
+        if f is not None:
+            F, starts = contact.at_start(load.scene, f, y.p, k.P.radius)
+            y = y._replace(N=y.N - F)
         out = rk4(field(k.P), Carry(y, k.s0 if helical else None, c.l), k.h[None], None, steps, project, path)
         end, nodes = out if path else (out, None)
-        return end._replace(s=None), nodes
+        return end._replace(s=None), nodes if f is None else (nodes, starts)
 
-    return lax.scan(piece, c._replace(s=None), ps)
+    return lax.scan(piece, c._replace(s=None), (ps, forces))
 
 
-def closing(robot: GeneralRobot, act: GeneralActuation, load: Loads, pl: Plan, y: State, lengths, F_c):
+def by_interval(a, P: int):
+    """Nodes of consecutive pieces (pieces, g + 1, ...), P breakpoint intervals' worth, as
+    (P, steps + 1, ...): each interval's first node after its breakpoint's jump, each later
+    piece's start its predecessor's end (before a contact force there)."""
+    a = a.reshape(P, a.shape[0] // P, *a.shape[1:])
+    rest = a[:, 1:, 1:]
+    return jnp.concatenate([a[:, 0], rest.reshape(P, rest.shape[1] * rest.shape[2], *a.shape[3:])], 1)
+
+
+def closing(robot: GeneralRobot, act: GeneralActuation, load: Loads, pl: Plan, y: State, lengths, F_c, touch=None, mu=0.0):
     """The scaled residual at the tip State y (before the jump at L) with the tendons' lengths:
-    tip (6,), then per driven tendon phi(tau / F_c, (delta_shape - delta) / L) (``shoot``); and
-    each tendon's slack flag (n_t,)."""
+    tip (6,), then per driven tendon phi(tau / F_c, (delta_shape - delta) / L) (``shoot``), then
+    with a scene (``touch``: contact.Candidates, the last one the tip's, whose force is applied
+    here) per candidate and obstacle phi_mu(lambda / F_c, gap / L) (contact.py); and each
+    tendon's slack flag (n_t,)."""
     L = robot.length
     N_L, M_L = y.N + pl.dN[-1], y.M + pl.dM[-1]
+    if touch is not None:
+        N_L = N_L - touch.force[-1] @ load.scene.normals(y.p)
     res = [(N_L - load.tip_force) / F_c, (M_L - load.tip_moment) / (F_c * L)]
     slack = jnp.zeros(robot.n_tendons, bool)
     if act.driven:
         i = np.asarray(act.driven)
         gap = displacements(robot, act, lengths)[i] - act.displacements
         a, b = act.tensions[i] / F_c, gap / L
-        res.append(a + b - jnp.sqrt(a**2 + b**2))  # Fischer-Burmeister: zero iff a, b >= 0 and a b = 0
+        res.append(contact.fischer_burmeister(a, b))
         slack = slack.at[i].set(b > a)
+    if touch is not None:
+        res.append(contact.residual(touch, F_c, L, mu))
     return jnp.concatenate(res), slack
 
 
-def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solver, x, F_c, path: bool = False):
+def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solver, x, F_c, path: bool = False, mu=0.0):
     """Integrates every interval from the scaled unknowns x to the tip: x[:6] the base wrench
-    (N(0), M(0)), x[6:] the tensions of the displacement-driven tendons (act.driven) over F_c.
+    (N(0), M(0)), x[6:6 + n_d] the tensions of the displacement-driven tendons (act.driven) over
+    F_c, then with ``load.scene`` the contact forces lambda / F_c, candidate by candidate, each
+    with one per obstacle (contact.py; their rows smoothed by mu, 0: exact).
 
     Returns:
         The scaled residual: tip (6,), then per driven tendon phi(tau / F_c, (delta_shape -
         delta) / L) with Fischer and Burmeister's phi(a, b) = a + b - |(a, b)|, zero where the
         tendon is taut at its commanded displacement delta (b = 0, a >= 0) or slack (tau = 0, the
-        shape asking for more than was pulled: b > 0); and the tip State (with ``path``: the Carry
-        at every interval's steps + 1 nodes, shapes (K, steps + 1, ...), both sides of each
-        breakpoint, the node at an interval's start after that breakpoint's jump; and the plan).
+        shape asking for more than was pulled: b > 0); then the contact rows (``closing``); and
+        the tip State (with ``path``: the Carry at every interval's steps + 1 nodes, shapes (K,
+        steps + 1, ...), both sides of each breakpoint, the node at an interval's start after that
+        breakpoint's jump; the plan, actuation, tendon lengths, slack flags and the
+        contact.Contact, None without a scene).
     """
+    scene, n_d = load.scene, len(act.driven)
     act = with_driven(act, x, F_c)
     pl = plan(robot, act, load, gravity)
-    ps, _ = pieces(pl, solver.steps, 1)
+    ps, g = pieces(pl, solver.steps, 1, None if scene is None else scene.every)
+    ps = jax.tree.map(lambda a: a[0], ps)
     y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:6] * F_c * robot.length)
     l0 = jnp.zeros(robot.n_tendons) if act.driven or path else None
-    end, nodes = integrate(robot, load, gravity, jax.tree.map(lambda a: a[0], ps), Carry(y0, None, l0), solver.steps, path)
-    res, slack = closing(robot, act, load, pl, end.y, end.l, F_c)
-    return (res, (nodes, pl, act, end.l, slack)) if path else (res, end.y)
+    touch = forces = None
+    if scene is not None:
+        P = pl.b.size - 1
+        where = contact.interior_pieces(P, solver.steps, g, scene.every)
+        lam = x[6 + n_d :].reshape(-1, scene.n_obstacles) * F_c
+        forces = jnp.zeros((ps.h.size, scene.n_obstacles)).at[where].set(lam[:-1])
+    end, out = integrate(robot, load, gravity, ps, Carry(y0, None, l0), g, path, forces)
+    nodes, starts = (out, None) if scene is None else out
+    if scene is not None:
+        # a candidate inside a zero-length interval shares its point with the next one: off
+        tip_gap = scene.distances(end.y.p) - pl.intervals.radius[-1]
+        touch = contact.Candidates(lam, jnp.concatenate([starts.gap[where], tip_gap[None]]), jnp.append(ps.h[where] == 0, False))
+    res, slack = closing(robot, act, load, pl, end.y, end.l, F_c, touch, mu)
+    if not path:
+        return res, end.y
+    found = None
+    if scene is not None:
+        s = jnp.append(ps.s0[where], robot.length)
+        p = jnp.concatenate([starts.p[where], end.y.p[None]])
+        found = contact.outputs(scene, s, p, touch, F_c, robot.length)
+    nodes = jax.tree.map(lambda a: by_interval(a, pl.b.size - 1), nodes)
+    return res, (nodes, pl, act, end.l, slack, found)
 
 
 def node_quantities(robot: GeneralRobot, act, load, gravity, nodes, pl: Plan):

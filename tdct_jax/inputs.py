@@ -12,6 +12,7 @@ import numpy as np
 
 from .checks import as_array, check_range, is_concrete
 from .loads import Actuation, TipLoad
+from .scene import Scene
 from .tree import pytree, set_fields, static, unchecked
 
 
@@ -95,6 +96,9 @@ class Loads:
         point_moment: their moments [N m], (k, 3).
         distributed_force: a force per unit length along the whole body [N/m], (3,) (added to
             the weight).
+        scene: the obstacles the robot may touch (a ``tdct.Scene``), or None: a pytree child, so
+            the solve's implicit derivatives, ``vmap`` and sweeps reach the obstacles' numbers.
+            Not scaled by the load continuation (issue 26; contact.py).
     """
 
     tip_force: object = (0.0, 0.0, 0.0)
@@ -103,8 +107,11 @@ class Loads:
     point_force: object = None
     point_moment: object = None
     distributed_force: object = (0.0, 0.0, 0.0)
+    scene: object = None
 
     def __post_init__(self):
+        if self.scene is not None and not isinstance(self.scene, Scene):
+            raise TypeError(f"scene must be a tdct.Scene or None, got {type(self.scene).__name__}")
         k = np.size(self.point_s) if is_concrete(self.point_s) else None
         point_s = as_array("point_s", self.point_s, (k,) if k is not None else None, unit=" m")
         check_range("point_s", point_s, 0.0, unit=" m")
@@ -133,7 +140,12 @@ class Loads:
             return cls(tip_force=load.force, tip_moment=load.moment)
         raise TypeError(f"load must be a tdct.Loads or tdct.TipLoad, got {type(load).__name__}")
 
+    def with_scene(self, scene) -> Loads:
+        """The same loads with the obstacles ``scene`` (a checked Scene, or None)."""
+        fields = {name: getattr(self, name) for name in self.__dataclass_fields__}
+        return unchecked(Loads, **(fields | dict(scene=scene)))
+
     def scaled(self, lam) -> Loads:
-        """Every load times lam (the solver's load continuation)."""
+        """Every load times lam (the solver's load continuation); the scene as it is."""
         scaled = {name: lam * getattr(self, name) for name in ("tip_force", "tip_moment", "point_force", "point_moment")}
-        return unchecked(Loads, point_s=self.point_s, distributed_force=lam * self.distributed_force, **scaled)
+        return unchecked(Loads, point_s=self.point_s, distributed_force=lam * self.distributed_force, scene=self.scene, **scaled)

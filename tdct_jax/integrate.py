@@ -58,4 +58,4 @@ def rk4(f, y0, h, params, steps: int, project=None, path: bool = False):
     y1, ys = lax.scan(piece, y0, (h, params))
     if not path:
         return y1
-    return y1, jax.tree.map(lambda a, b: jnp.concatenate([a[None], b.reshape(-1, *b.shape[2:])]), y0, ys)
+    return y1, jax.tree.map(lambda a, b: jnp.concatenate([a[None], b.reshape(b.shape[0] * b.shape[1], *b.shape[2:])]), y0, ys)

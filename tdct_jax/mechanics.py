@@ -39,6 +39,7 @@ def compliance(
     solver: SolverOptions = DEFAULT_SOLVER,
     guess=None,
     throw: bool = True,
+    scene=None,
 ):
     """Compliance CM = d p(s) / d F (eq. 41), exact, in m/N: at the tip (s = L, F the tip force
     F_e) by default, or at the arc length ``at`` (F a point force applied there).
@@ -60,6 +61,8 @@ def compliance(
             vector and loads in the world frame).
         throw: raise ``ConvergenceError`` if the solve did not converge (default, as for
             ``tdct.solve``); with False a non-converged solve gives a matrix of NaN.
+        scene: obstacles (as for ``tdct.solve``): the compliance in contact, the contact set
+            held (touching candidates stay on their obstacles, the others free).
 
     Returns:
         CM, shape (3, 3) (or (6, 6) with ``full``).
@@ -68,11 +71,11 @@ def compliance(
         ValueError: bad input, ``at`` outside [0, L] included (names field, value and range).
     """
     if at is None:
-        C, _ = compliance_and_solution(robot, act, load, gravity=gravity, solver=solver, guess=guess, throw=throw)
+        C, _ = compliance_and_solution(robot, act, load, gravity=gravity, solver=solver, guess=guess, throw=throw, scene=scene)
     else:
         if isinstance(robot, Robot):
             robot, act, load = robot.to_general(), GeneralActuation.of(act, 1), Loads.of(load)
-        args = solve_arguments(robot, act, load, gravity, guess, solver)
+        args = solve_arguments(robot, act, load, gravity, guess, solver, scene)
         at = as_array("at", at, ())
         if is_concrete(robot.length):
             L = float(robot.length)
@@ -92,7 +95,12 @@ def _compliance_at(robot, act, load, gravity, guess, s, solver):
             point_moment=jnp.concatenate([jnp.reshape(load.point_moment, (-1, 3)), w[None, 3:]]),
         )
         loads = unchecked(
-            Loads, tip_force=load.tip_force, tip_moment=load.tip_moment, distributed_force=load.distributed_force, **point
+            Loads,
+            tip_force=load.tip_force,
+            tip_moment=load.tip_moment,
+            distributed_force=load.distributed_force,
+            scene=load.scene,
+            **point,
         )
         sol = solution_and_compliance(robot, act, loads, gravity, guess, solver)[0]
         i = jnp.searchsorted(sol.s, s, side="right") - 1  # a node lies at s: it is a breakpoint
@@ -102,9 +110,11 @@ def _compliance_at(robot, act, load, gravity, guess, s, solver):
     return jnp.concatenate([Jp, rotation_columns(JR, R)]), sol
 
 
-def compliance_and_solution(robot, act, load=None, *, gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True):
+def compliance_and_solution(
+    robot, act, load=None, *, gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True, scene=None
+):
     """The 6x6 compliance of ``compliance(..., full=True)`` and the Solution it was taken at, in one solve."""
-    return _checked(_compliance, solve_arguments(robot, act, load, gravity, guess, solver), throw)
+    return _checked(_compliance, solve_arguments(robot, act, load, gravity, guess, solver, scene), throw)
 
 
 def _checked(f, args, throw, *static):
@@ -174,7 +184,9 @@ def pose_jacobian(robot, act, load, gravity, guess, solver, wrt):
 _pose_jacobian = jax.jit(pose_jacobian, static_argnums=(6,))
 
 
-def kinematic_jacobian(robot, act, load=None, *, gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True):
+def kinematic_jacobian(
+    robot, act, load=None, *, gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True, scene=None
+):
     """d(tip position [m], tip rotation vector [rad]) / d(tensions [N], insertion [m]), shape (6, n_t + 1).
 
     The last column is the tube insertion depth, a real differentiable input (one-sided at d = 0
@@ -184,23 +196,39 @@ def kinematic_jacobian(robot, act, load=None, *, gravity=STANDARD_GRAVITY, solve
     tendon's tension [N] in the robot's order, then each displacement-driven tendon's
     displacement [m] in ``driven`` order, then each tube's insertion [m]. A driven tendon's
     tension column is zero: its tension follows from its displacement.
+
+    With a ``scene`` (as for ``tdct.solve``) the contact set is held: the touching candidates stay
+    on their obstacles, and the columns are a GeneralActuation's (a Robot is solved as its
+    ``to_general()``).
     """
-    return _checked(_pose_jacobian, solve_arguments(robot, act, load, gravity, guess, solver), throw, "actuation")[0]
+    args = solve_arguments(robot, act, load, gravity, guess, solver, scene)
+    return _checked(_pose_jacobian, args, throw, "actuation")[0]
 
 
 def parameter_jacobian(
-    robot, act, load=None, *, params=("E_silicone",), gravity=STANDARD_GRAVITY, solver=DEFAULT_SOLVER, guess=None, throw=True
+    robot,
+    act,
+    load=None,
+    *,
+    params=("E_silicone",),
+    gravity=STANDARD_GRAVITY,
+    solver=DEFAULT_SOLVER,
+    guess=None,
+    throw=True,
+    scene=None,
 ):
     """d(tip position, tip rotation vector) / d(fields named in ``params``), (6, len(params)).
 
     Field names as in ``fields.py``: a Robot's "E_silicone", ..., a GeneralRobot's
     "sections[*].E", "tendons[0].offset", ... ("[*]": one value shared by every item). Units
-    follow the fields (e.g. m/Pa for E_silicone). Arguments as for ``compliance``.
+    follow the fields (e.g. m/Pa for E_silicone). Arguments as for ``compliance``; with a
+    ``scene`` a Robot is solved as its ``to_general()``, so ``params`` name the general fields.
     """
+    args = solve_arguments(robot, act, load, gravity, guess, solver, scene)
+    robot = args[0]
     check_params(robot, params)
     for p in params:
         fields.value(robot, p)  # set, and for "[*]" one value
-    args = solve_arguments(robot, act, load, gravity, guess, solver)
     return _checked(_pose_jacobian, args, throw, tuple(params))[0]
 
 

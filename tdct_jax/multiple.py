@@ -357,12 +357,11 @@ def path(robot, act, load, gravity, solver, u: Unknowns):
         ys = r.nodes._replace(p=r.nodes.p + offsets[:, None])
         return tail, jax.tree.map(lambda a: jnp.concatenate([a[0], a[1:, 1:].reshape(-1, *a.shape[2:])]), ys)
     ys = r.nodes.y._replace(p=r.nodes.y.p + offsets[:, None, None])
-    n_b, per = r.plan.b.size - 1, solver.steps // (r.nodes.y.p.shape[2] - 1)
+    n_b = r.plan.b.size - 1
 
     def by_breakpoint_interval(a):  # pieces (K, c / g, g + 1, ...) -> (P, steps + 1, ...)
-        a = a.reshape(n_b, per, *a.shape[2:])
-        return jnp.concatenate([a[:, 0], a[:, 1:, 1:].reshape(n_b, -1, *a.shape[3:])], 1)
+        return general.by_interval(a.reshape(-1, *a.shape[2:]), n_b)
 
     lengths = jnp.sum(r.lengths, 0)
     slack = _closing_at(robot, load, u, r, F_c)[1]
-    return tail, (general.Carry(jax.tree.map(by_breakpoint_interval, ys)), r.plan, r.act, lengths, slack)
+    return tail, (general.Carry(jax.tree.map(by_breakpoint_interval, ys)), r.plan, r.act, lengths, slack, None)

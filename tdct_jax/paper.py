@@ -21,6 +21,7 @@ from .manipulation import capacity, insertion_optimum, load_capacity, optimal_in
 from .mechanics import compliance, compliance_ellipsoid
 from .options import DEFAULT_SOLVER
 from .robot import Robot
+from .scene import Capsule, Plane, Scene
 from .solve import solve
 from .sweep import sweep
 
@@ -57,6 +58,16 @@ PAPER_BENDING_RANGE_DEG = (-57.1, 61.4)
 """Sec. III.B: tip bending angles over the Table III conditions."""
 CALIBRATION_TENSIONS = (2.0, 4.0, 6.0, 8.0, 10.0)
 """Sec. III.B calibrates on "five distinct tendon forces" on one tendon without listing them: ours."""
+CONTACT_TENSION = 6.0
+"""Beyond the paper (issue 26): the tension [N] on tendon 3 (body -y) that presses the tip on a table."""
+TABLE_HEIGHT = -0.04
+"""The table's surface [m]: the plane y = TABLE_HEIGHT, solid below."""
+CONTACT_INSERTIONS = tuple(MM * d for d in range(0, 161, 10))
+CYLINDER = dict(a=(-0.05, -0.03, 0.04), b=(0.05, -0.03, 0.04), radius=0.01)
+"""A horizontal cylinder [m] under the body near its base, across the bending plane: tendon 3 bends
+the body down over it."""
+CYLINDER_TENSION = 10.0
+"""The tension [N] on tendon 3 that bends the body over ``CYLINDER``."""
 
 
 def tendon1(robot: Robot, tensions) -> np.ndarray:
@@ -494,3 +505,54 @@ def stiffness_map(
         out["least_tension"][1],
         out["stiffest"][1],
     )
+
+
+def contact_press(
+    robot: Robot,
+    tension: float = CONTACT_TENSION,
+    insertions=CONTACT_INSERTIONS,
+    *,
+    every: int = 2,
+    progress: bool = True,
+    **options,
+) -> dict:
+    """Beyond the paper (issue 26): the tip pressed on a table (``TABLE_HEIGHT``) by tendon 3 at
+    ``tension`` [N], per insertion [m]: the normal force on the table [N] and where it acts, and
+    the tip compliance [m/N] in contact and free (the stiffness a hand feels at the tip).
+
+    Returns:
+        dict of arrays over insertions: insertion, force (total on the table), tip_force (its
+        share at the tip candidate), contact_s (arc length of the largest contact force),
+        compliance and free_compliance (6, 6 each), result (status codes).
+    """
+    scene = Scene((Plane(point=(0.0, TABLE_HEIGHT, 0.0), normal=(0.0, 1.0, 0.0), name="table"),), every=every)
+    rows = []
+    for d in tqdm(insertions, desc="tip on a table", unit="insertion", disable=not progress, leave=False):
+        act = Actuation(np.array([0.0, 0.0, tension, 0.0]), d)
+        sol = solve(robot, act, scene=scene, throw=False, **options)
+        f = np.asarray(sol.contact.force[:, 0])
+        CM = compliance(robot, act, scene=scene, throw=False, **options)
+        rows.append(
+            (
+                d,
+                f.sum(),
+                f[-1],
+                float(sol.contact.s[np.argmax(f)]),
+                CM,
+                compliance(robot, act, throw=False, **options),
+                int(sol.result),
+            )
+        )
+    names = ("insertion", "force", "tip_force", "contact_s", "compliance", "free_compliance", "result")
+    return {n: np.array([r[i] for r in rows]) for i, n in enumerate(names)}
+
+
+def body_contact(robot: Robot, tension: float = CYLINDER_TENSION, insertion: float = 0.0, *, every: int = 2, **options):
+    """Beyond the paper (issue 26): the body bent by tendon 3 over a cylinder (``CYLINDER``).
+
+    Returns:
+        (Solution with its contacts, the Scene, the Actuation).
+    """
+    scene = Scene((Capsule(**CYLINDER, name="cylinder"),), every=every)
+    act = Actuation(np.array([0.0, 0.0, tension, 0.0]), insertion)
+    return solve(robot, act, scene=scene, throw=False, **options), scene, act

@@ -126,12 +126,17 @@ def plot_robot(sol, robot, act=None, load=None, path: str | Path | None = None, 
     """Side view (world z-y), top view (z-x) and 3D view of a solved ``GeneralRobot``, in mm: the
     body coloured by section, each tube's insertion shaded, every tendon along the body from the
     base to its anchor (a dot, its number beside it in 3D, in its anchor section's colour), point
-    masses as disks across the body, point loads and the tip force as arrows.
+    masses as disks across the body, point loads and the tip force as arrows. With a scene in the
+    load: the body's outline to scale, the obstacles (a plane as its trace and its solid side in
+    the flat views, a patch of it in 3D; spheres and capsules as their outlines, their surfaces in
+    3D; ``Distance`` obstacles are not drawn) and each contact force on the robot as an arrow
+    from the touching point, on the same scale as the loads.
 
     Args:
-        sol: a single (unbatched) GeneralSolution of ``robot``.
+        sol: a single (unbatched) GeneralSolution of ``robot`` (with ``sol.contact`` for a scene).
         robot: the GeneralRobot solved.
-        act, load: its GeneralActuation (tube depths) and Loads (or TipLoad); None: none.
+        act, load: its GeneralActuation (tube depths) and Loads (or TipLoad; ``load.scene``: the
+            obstacles it was solved with); None: none.
         path: where to save a PNG; the figure is returned either way.
         title: figure title.
     """
@@ -153,8 +158,14 @@ def plot_robot(sol, robot, act=None, load=None, path: str | Path | None = None, 
     disks = [p[k] + ring @ R[k].T for k in (_node(s, float(m.s)) for m in robot.masses)]
     forces = [(float(x), np.asarray(f)) for x, f in zip(np.asarray(load.point_s), np.asarray(load.point_force), strict=True)]
     forces += [(length, np.asarray(load.tip_force))] if np.any(np.asarray(load.tip_force)) else []
-    biggest = max([np.linalg.norm(f) for _, f in forces], default=0.0)
+    scene = load.scene
+    radius = 1e3 * np.array(
+        [float(robot.sections[j].outer_diameter) / 2 for j in np.searchsorted(ends, s - 1e-12).clip(0, len(ends) - 1)]
+    )
+    touching = _touching(sol, scene, radius, s) if scene is not None else []
+    biggest = max([np.linalg.norm(f) for _, f in forces] + [np.linalg.norm(f) for _, f in touching], default=0.0)
     arrows = [(p[_node(s, x)], 0.2 * length * 1e3 * f / biggest) for x, f in forces if np.linalg.norm(f) > 0]
+    pushes = [(q, 0.2 * length * 1e3 * f / biggest) for q, f in touching]
 
     fig = plt.figure(figsize=(17, 5.6), layout="constrained")
     views = [fig.add_subplot(1, 3, 1), fig.add_subplot(1, 3, 2), fig.add_subplot(1, 3, 3, projection="3d")]
@@ -176,11 +187,16 @@ def plot_robot(sol, robot, act=None, load=None, path: str | Path | None = None, 
                 ax.text(*xyz(q[on][-1]), f" {i + 1}", fontsize="small")
         for disk in disks:
             ax.plot(*xyz(disk), color="saddlebrown", lw=2)
-        for base, vec in arrows:
+        for (base, vec), colour in [*((a, "tab:red") for a in arrows), *((a, "tab:green") for a in pushes)]:
             if len(cols) == 3:
-                ax.quiver(*xyz(base), *xyz(vec), color="tab:red", lw=2, arrow_length_ratio=0.2)
+                ax.quiver(*xyz(base), *xyz(vec), color=colour, lw=2, arrow_length_ratio=0.2)
             else:
-                ax.annotate("", xy=xyz(base + vec), xytext=xyz(base), arrowprops=dict(arrowstyle="->", color="tab:red", lw=2))
+                ax.annotate("", xy=xyz(base + vec), xytext=xyz(base), arrowprops=dict(arrowstyle="->", color=colour, lw=2))
+        if scene is not None and len(cols) == 2:
+            _outline(ax, p[:, cols], radius)
+            _draw_scene(ax, scene, cols, p)
+        elif scene is not None:
+            _draw_scene_3d(ax, scene, p)
     side, top, ax3 = views
     if robot.tendons:
         side.plot([], [], "-o", color="0.4", lw=1.1, ms=5, mec="black", label="tendons, to their anchors (numbered in 3D)")
@@ -188,7 +204,14 @@ def plot_robot(sol, robot, act=None, load=None, path: str | Path | None = None, 
         side.plot([], [], color="saddlebrown", lw=2, label="point masses")
     if arrows:
         side.plot([], [], color="tab:red", lw=2, label=f"forces: point loads, tip (longest {biggest:.3g} N)")
-    every = np.concatenate([p, *paths, *disks, *(np.stack([b, b + v]) for b, v in arrows)])
+    if scene is not None:
+        side.fill([], [], color=OBSTACLE, alpha=0.35, label=f"obstacles: {', '.join(scene.names)}")
+        if pushes:
+            largest = max(np.linalg.norm(f) for _, f in touching)
+            side.plot([], [], color="tab:green", lw=2, label=f"contact forces on the robot (largest {largest:.3g} N)")
+    every = np.concatenate([p, *paths, *disks, *(np.stack([b, b + v]) for b, v in arrows + pushes)])
+    if scene is not None:
+        every = np.concatenate([every, _scene_points(scene, p)])
     for ax, (h, v), name in ((side, (2, 1), "side view"), (top, (2, 0), "top view")):
         ax.set_xlabel(f"{'xyz'[h]} [mm]")
         ax.set_ylabel(f"{'xyz'[v]} [mm]")
@@ -202,6 +225,139 @@ def plot_robot(sol, robot, act=None, load=None, path: str | Path | None = None, 
     if title:
         fig.suptitle(title)
     return _finish(fig, path)
+
+
+OBSTACLE = "0.5"
+"""The obstacles' colour."""
+
+
+def _touching(sol, scene, radius, s) -> list:
+    """(touching point on the body's surface [mm], force on the robot [N]) of each active contact:
+    the centreline point less the body's radius along the obstacle's normal."""
+    c = sol.contact
+    out = []
+    for j, o in zip(*np.nonzero(np.asarray(c.active)), strict=True):
+        n = np.asarray(c.normal)[j, o]
+        out.append((1e3 * np.asarray(c.position)[j] - radius[_node(s, float(c.s[j]))] * n, float(c.force[j, o]) * n))
+    return out
+
+
+def _outline(ax, q, radius):
+    """The body's silhouette in a flat view: the centreline q (n, 2) [mm] offset by the radius
+    (n,) [mm] to both sides of its tangent."""
+    t = np.gradient(q, axis=0)
+    t = t / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
+    side = np.stack([-t[:, 1], t[:, 0]], 1) * radius[:, None]
+    for sign in (1, -1):
+        ax.plot(*(q + sign * side).T, color="0.25", lw=0.8)
+
+
+def _draw_scene(ax, scene, cols, p):
+    """The obstacles in the flat view of world columns ``cols`` (h, v), in mm. A sphere or capsule
+    is drawn as its projection; a plane as its trace in the view's plane through the robot's mean
+    depth, its solid side shaded (not drawn when the view looks along it)."""
+    from matplotlib.patches import Polygon
+
+    from .scene import Capsule, Plane, Sphere
+
+    depth_col = 3 - sum(cols)
+    depth = p[:, depth_col].mean()
+    for o, name in zip(scene.obstacles, scene.names, strict=True):
+        if isinstance(o, Plane):
+            n, point = np.asarray(o.normal), 1e3 * np.asarray(o.point)
+            n2 = n[list(cols)]
+            if np.linalg.norm(n2) < 0.05:
+                continue
+            c = n @ point - n[depth_col] * depth
+            x0 = c * n2 / (n2 @ n2)
+            t, inward = np.array([-n2[1], n2[0]]) / np.linalg.norm(n2), -n2 / np.linalg.norm(n2)
+            far = 1e5
+            solid = [x0 + far * t, x0 - far * t, x0 - far * t + far * inward, x0 + far * t + far * inward]
+            ax.add_artist(Polygon(solid, closed=True, color=OBSTACLE, alpha=0.25, lw=0))  # add_artist: the limits ignore it
+            ax.axline(x0, x0 + t, color=OBSTACLE, lw=1.5)
+            label = _foot(p[:, list(cols)].mean(0), n2, c) + 0.05 * np.ptp(p, axis=0).max() * inward
+        elif isinstance(o, (Sphere, Capsule)):
+            a, b = (o.center, o.center) if isinstance(o, Sphere) else (o.a, o.b)
+            outline = _stadium(1e3 * np.asarray(a)[list(cols)], 1e3 * np.asarray(b)[list(cols)], 1e3 * float(o.radius))
+            ax.add_patch(Polygon(outline, closed=True, facecolor=OBSTACLE, edgecolor=OBSTACLE, alpha=0.35, lw=1.5))
+            label = outline.mean(0)
+        else:
+            continue
+        ax.text(*label, name, fontsize="small", ha="center", va="center")
+
+
+def _foot(q, n2, c):
+    """The foot of the point q (2,) on the line n2 . x = c."""
+    return q - (n2 @ q - c) / (n2 @ n2) * n2
+
+
+def _stadium(a, b, r, k=24):
+    """The outline (2 k, 2) of the points within r of the segment [a, b] in a plane (a = b: a circle)."""
+    d = b - a
+    angle = np.arctan2(d[1], d[0]) if np.linalg.norm(d) > 0 else 0.0
+    half = np.linspace(-np.pi / 2, np.pi / 2, k)
+    arc = lambda centre, phi: centre + r * np.stack([np.cos(phi), np.sin(phi)], 1)  # noqa: E731
+    return np.concatenate([arc(b, angle + half), arc(a, angle + np.pi + half)])
+
+
+def _draw_scene_3d(ax3, scene, p):
+    """The obstacles in the 3D view (drawn as x, z, y), in mm: a square of each plane around the
+    foot of the robot's centre, each sphere's and capsule's surface."""
+    from .scene import Capsule, Plane, Sphere
+
+    size = max(np.ptp(p, axis=0).max(), 1.0)
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 25), np.linspace(0, np.pi, 13))
+    ball = np.stack([np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v)], -1)
+    for o in scene.obstacles:
+        if isinstance(o, Plane):
+            n = np.asarray(o.normal)
+            centre = p.mean(0) - (n @ (p.mean(0) - 1e3 * np.asarray(o.point))) * n
+            e1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(n, e1)
+            g = np.linspace(-0.6, 0.6, 2) * size
+            surface = centre + g[:, None, None] * e1 + g[None, :, None] * e2
+        elif isinstance(o, (Sphere, Capsule)):
+            a, b = (o.center, o.center) if isinstance(o, Sphere) else (o.a, o.b)
+            a, b, r = 1e3 * np.asarray(a), 1e3 * np.asarray(b), 1e3 * float(o.radius)
+            # a sphere swept along [a, b]: the upper half sphere at b, the lower at a
+            shift = np.where(ball @ (b - a)[:, None] >= 0, b, a) if np.any(b != a) else a
+            surface = shift + r * ball
+            if np.any(b != a):
+                ax3.plot_surface(*_cylinder(a, b, r)[..., [0, 2, 1]].transpose(2, 0, 1), color=OBSTACLE, alpha=0.3, lw=0)
+        else:
+            continue
+        ax3.plot_surface(*surface[..., [0, 2, 1]].transpose(2, 0, 1), color=OBSTACLE, alpha=0.3, lw=0)
+
+
+def _cylinder(a, b, r):
+    """The surface (2, 25, 3) of the cylinder of radius r about [a, b]."""
+    d = (b - a) / np.linalg.norm(b - a)
+    e1 = np.cross(d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(d, e1)
+    phi = np.linspace(0, 2 * np.pi, 25)[None, :, None]
+    ring = r * (np.cos(phi) * e1 + np.sin(phi) * e2)
+    return np.stack([a, b])[:, None, :] + ring
+
+
+def _scene_points(scene, p):
+    """Points [mm] the views must show besides the robot: each plane's point nearest the tip and
+    nearest the robot's centre (its name goes there, a little inside), each sphere's and
+    capsule's extent."""
+    from .scene import Capsule, Plane, Sphere
+
+    points, inside = [], 0.1 * np.ptp(p, axis=0).max()
+    for o in scene.obstacles:
+        if isinstance(o, Plane):
+            n, q = np.asarray(o.normal), 1e3 * np.asarray(o.point)
+            points += [x - (n @ (x - q)) * n for x in (p[-1], p.mean(0))]
+            points.append(points[-1] - inside * n)
+        elif isinstance(o, (Sphere, Capsule)):
+            ends = [o.center] if isinstance(o, Sphere) else [o.a, o.b]
+            r = 1e3 * float(o.radius)
+            points += [1e3 * np.asarray(e) + sign * r for e in ends for sign in (-1, 1)]
+    return np.reshape(points, (-1, 3))
 
 
 def _columns(q, cols):
@@ -632,6 +788,37 @@ def plot_prediction(prediction, calibration=None, path: str | Path | None = None
         ax.set_xlabel("fit step")
         ax.set_ylabel("training tip RMSE [mm]")
         ax.set_title(f"fit of {len(calibration.params)} values", fontsize=10)
+    if title:
+        fig.suptitle(title)
+    return _finish(fig, path)
+
+
+@_styled
+def plot_contact_press(res: dict, path: str | Path | None = None, title: str | None = None):
+    """The tip pressed on a table against insertion (``paper.contact_press``): the normal force on
+    the table, and the tip compliance in contact beside the free robot's, along x (across the
+    bending plane), y (the table's normal) and z (along the table in the bending plane)."""
+    plt = _pyplot()
+    d = 1e3 * np.asarray(res["insertion"])
+    ok = np.asarray(res["result"]) == 0
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4))
+    ax.plot(d[ok], np.asarray(res["force"])[ok], "o-", ms=4, label="on the table, total")
+    ax.plot(d[ok], np.asarray(res["tip_force"])[ok], "x--", ms=5, label="at the tip")
+    ax.set_xlabel("insertion $d$ [mm]")
+    ax.set_ylabel("normal force [N]")
+    ax.set_ylim(bottom=0)
+    ax.legend(fontsize=8)
+    ax.set_title("how hard the tip presses", fontsize=10)
+    for k, (axis, colour) in enumerate(zip("xyz", ("C0", "C2", "C1"), strict=True)):
+        bx.plot(d[ok], 1e3 * np.asarray(res["free_compliance"])[ok, k, k], "--", color=colour, label=f"{axis}, free")
+        bx.plot(d[ok], 1e3 * np.asarray(res["compliance"])[ok, k, k], "o-", ms=3, color=colour, label=f"{axis}, on the table")
+    bx.set_yscale("symlog", linthresh=1e-2)
+    bx.set_xlabel("insertion $d$ [mm]")
+    bx.set_ylabel("tip compliance [mm/N]")
+    bx.legend(fontsize=7, ncol=3)
+    bx.set_title("the stiffness a hand feels at the tip", fontsize=10)
+    if not ok.all():
+        fig.text(0.01, 0.01, f"{np.count_nonzero(~ok)} insertions did not converge (not drawn)", fontsize=8, color="C3")
     if title:
         fig.suptitle(title)
     return _finish(fig, path)

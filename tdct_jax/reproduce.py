@@ -19,6 +19,7 @@ import jax
 import numpy as np
 
 from . import paper, plotting
+from .inputs import GeneralActuation, Loads
 from .robot import Robot
 
 FULL = dict(
@@ -35,6 +36,7 @@ FULL = dict(
     va_heights=paper.VA_HEIGHTS,
     stiffness_map=(paper.MAP_TENSIONS, paper.MAP_INSERTIONS),
     fit=True,
+    contact_insertions=paper.CONTACT_INSERTIONS,
 )
 """The paper's grids."""
 QUICK = dict(
@@ -51,6 +53,7 @@ QUICK = dict(
     va_heights=None,
     stiffness_map=None,
     fit=False,
+    contact_insertions=(0.0, 0.08, 0.16),
 )
 """Coarse grids (for CI and a first look); the ten load capacities are computed in full either way;
 no Sec. V.A as inverse kinematics, no stiffness map and no parameter fit (each compiles programs of
@@ -89,6 +92,7 @@ def reproduce(
         ("Fig. 14 and Sec. V.A: load capacity", "fig14"),
         ("Sec. III.B: bending-angle range over the Table III conditions", "table3"),
     ]
+    steps.append(("Beyond the paper: the tip pressed on a table, the body over a cylinder (contact)", "contact"))
     steps.append(("Sec. V.B: the tip angles the tube allows at fixed tip heights (inverse kinematics)", "vb"))
     if grids["va_heights"]:
         steps.append(("Sec. V.A: the highest reach with 50 g, and the stiffest way to each lower height (IK)", "va_ik"))
@@ -264,6 +268,27 @@ def _stiffness_map(robot, grids, out, opts, say):
     ]
 
 
+def _contact(robot, grids, out, opts, say):
+    res = paper.contact_press(robot, insertions=grids["contact_insertions"], progress=opts["progress"])
+    title = f"tip on a table {-1e3 * paper.TABLE_HEIGHT:g} mm below the axis, tendon 3 at {paper.CONTACT_TENSION:g} N"
+    plotting.plot_contact_press(res, out / "contact_press.png", title=title)
+    sol, scene, act = paper.body_contact(robot)
+    general = robot.to_general()
+    load = Loads().with_scene(scene)
+    title = f"over a cylinder, tendon 3 at {paper.CYLINDER_TENSION:g} N, no tube"
+    plotting.plot_robot(sol, general, GeneralActuation.of(act, general.n_tubes), load, out / "contact_cylinder.png", title=title)
+    ok = res["result"] == 0
+    note = f"tendon 3 at {paper.CONTACT_TENSION:g} N; {np.count_nonzero(~ok)} of {ok.size} insertions not converged"
+    f = np.where(ok, res["force"], np.nan)
+    free, held = res["free_compliance"][:, 0, 0], res["compliance"][:, 0, 0]
+    return [
+        _row("tip force on the table, no tube", f[0], None, "N", note),
+        _row("tip force on the table, full tube", f[-1], None, "N", note),
+        _row("lateral tip compliance on the table over free, no tube", 100 * held[0] / free[0], None, "%", note),
+        _row("body force on the cylinder", float(np.sum(sol.contact.force)), None, "N", "tendon 3 at 10 N, no tube"),
+    ]
+
+
 _STUDIES = dict(
     fig8a=_fig8a,
     fig9=_fig9,
@@ -276,6 +301,7 @@ _STUDIES = dict(
     va_ik=_va_ik,
     stiffness_map=_stiffness_map,
     fit=_fit,
+    contact=_contact,
 )
 
 

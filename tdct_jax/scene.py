@@ -155,6 +155,8 @@ class Distance:
         return self.function(p, self.params)
 
 
+SCENES = Path(__file__).parent / "scenes"
+"""The example scene files shipped with the package (``table.toml``: a table and a ball on it)."""
 OBSTACLES = {"plane": Plane, "sphere": Sphere, "capsule": Capsule}
 """The obstacle kinds a scene file names (``kind = ...``); ``Distance`` is Python only."""
 
@@ -164,6 +166,12 @@ def _norm(x):
     return jnp.sqrt(jnp.maximum(jnp.dot(x, x), 1e-300))
 
 
+EVERY = 4
+"""Default candidate spacing in RK4 steps: the paper robot's tip resting on a plane is solved in
+2.1x the contact-free warm solve (every 1: 4.7x, 2: 4.3x); a body contact in 5.6x (every 1: 54x,
+2: 9.7x), its force within 4% of every 2's (benchmarks/contact_speed.py)."""
+
+
 @pytree
 class Scene:
     """Obstacles the robot can touch, and where along the body it can touch them.
@@ -171,11 +179,11 @@ class Scene:
     Attributes:
         obstacles: a tuple of ``Plane``, ``Sphere``, ``Capsule`` and ``Distance`` (at least one).
         every: a contact candidate every ``every`` RK4 steps along the body, and at the tip
-            (static; 1 is the finest).
+            (static; 1 is the finest; default ``EVERY``).
     """
 
     obstacles: tuple = ()
-    every: int = static(default=1)
+    every: int = static(default=EVERY)
 
     def __post_init__(self):
         obstacles = tuple(self.obstacles) if isinstance(self.obstacles, (list, tuple)) else (self.obstacles,)
@@ -279,7 +287,10 @@ def scene_from_dict(table: dict, where: str = "the scene") -> Scene:
             obstacles.append(OBSTACLES[kind](**{f: item[f] for f in fields}, name=str(item.get("name", ""))))
         except ValueError as e:
             raise ValueError(f"{where}: obstacles[{i}]: {e}") from None
-    return Scene(tuple(obstacles), every=table.get("every", 1))
+    try:
+        return Scene(tuple(obstacles), every=table.get("every", EVERY))
+    except ValueError as e:
+        raise ValueError(f"{where}: {e}") from None
 
 
 def read_scene(path) -> Scene:

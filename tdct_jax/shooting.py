@@ -15,7 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from . import general, multiple
+from . import general, multiple, status
+from .contact import SMOOTHING
 from .description import GeneralRobot
 from .integrate import rk4
 from .loads import Actuation, TipLoad
@@ -50,10 +51,11 @@ def force_scale(robot: Robot, act: Actuation, load: TipLoad, gravity):
     return jnp.maximum(F, 1e-3)
 
 
-def straight_rod(robot: Robot, act: Actuation, load: TipLoad, gravity, F_c):
-    """Scaled base unknowns of the straight rod: exact in force, first-order in moment."""
+def straight_rod(robot: Robot, act: Actuation, load: TipLoad, gravity, F_c, steps: int | None = None):
+    """Scaled base unknowns of the straight rod: exact in force, first-order in moment (with a
+    scene, ``steps`` given: no contact force, ``general.straight_rod``)."""
     if isinstance(robot, GeneralRobot):
-        return general.straight_rod(robot, act, load, gravity, F_c)
+        return general.straight_rod(robot, act, load, gravity, F_c, steps)
     L, d = robot.length, act.insertion
     rho1, rho2 = robot.linear_density(False), robot.tube_linear_density
     N0 = load.force + gravity * (rho1 * L + rho2 * d)
@@ -90,15 +92,16 @@ def integrate(segs: Segment, y: State, h, gravity, path: bool = False, steps: in
     return rk4(lambda seg, y: vector_field(seg, gravity)(y), y, h, segs, steps, project, path)
 
 
-def shoot(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x, F_c, path: bool = False):
+def shoot(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x, F_c, path: bool = False, mu=0.0):
     """Integrates both segments from the scaled base unknowns x to the tip.
 
     Returns:
         The scaled tip residual (6,) and the tip State (with ``path``: the States at all
-        2 * steps + 1 nodes, s = d once). A GeneralRobot goes to ``general.shoot``.
+        2 * steps + 1 nodes, s = d once). A GeneralRobot goes to ``general.shoot`` (mu: the
+        contact rows' smoothing there).
     """
     if isinstance(robot, GeneralRobot):
-        return general.shoot(robot, act, load, gravity, solver, x, F_c, path)
+        return general.shoot(robot, act, load, gravity, solver, x, F_c, path, mu)
     back, sil = segments(robot, act, solver)
     L, d, n = robot.length, act.insertion, solver.steps
     y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:] * F_c * L)
@@ -138,13 +141,13 @@ class RootInfo(NamedTuple):
     jacobians: tuple
 
 
-def starts(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, F_c):
+def starts(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, F_c, steps: int | None = None):
     """Newton's scaled start: ``guess`` (``root``) where finite, else the straight rod; and the
-    straight rod's unknowns."""
-    x_straight = straight_rod(robot, act, load, gravity, F_c)
+    straight rod's unknowns (``straight_rod``; any contact forces not guessed: zero)."""
+    x_straight = straight_rod(robot, act, load, gravity, F_c, steps)
     finite = jnp.all(jnp.isfinite(guess))
     start = scaled(robot, guess, F_c)
-    if x_straight.size > start.size:  # a GeneralRobot's displacement-driven tensions, not guessed
+    if x_straight.size > start.size:  # a GeneralRobot's displacement-driven tensions and contact forces
         start = jnp.concatenate([start, x_straight[start.size :]])
     return jnp.where(finite, start, x_straight), x_straight
 
@@ -174,18 +177,35 @@ def root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: So
 def _root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: SolverOptions):
     """``root`` by single shooting."""
     F_c = force_scale(robot, act, load, gravity)
-    x0, x_straight = starts(robot, act, load, gravity, guess, F_c)
+    x0, x_straight = starts(robot, act, load, gravity, guess, F_c, solver.steps)
 
-    def F_at(lam):
+    def F_at(lam, mu=0.0):
         act_lam, load_lam, gravity_lam = loads_at(robot, act, load, gravity, lam)
 
         def F(x):
-            res, tip = shoot(robot, act_lam, load_lam, gravity_lam, solver, x, F_c)
+            res, tip = shoot(robot, act_lam, load_lam, gravity_lam, solver, x, F_c, mu=mu)
             return res, (tip.p, tip.R)
 
         return F
 
-    found = continuation(F_at, x0, x_straight, solver.tol, solver.max_iter, solver.stages)
+    if getattr(load, "scene", None) is None:
+        found = continuation(F_at, x0, x_straight, solver.tol, solver.max_iter, solver.stages)
+        return found.x, RootInfo(found.iterations, found.stages, found.result, found.jacobians)
+    # contact: plain Newton from the contact-free start (no contact: the contact-free solve's own
+    # steps); where it fails, the smoothed complementarity, mu decreasing (contact.SMOOTHING), then
+    # the exact one, each from the last root, each with the load continuation
+    first = continuation(F_at, x0, x_straight, solver.tol, solver.max_iter, (1,))
+
+    def smoothed(_):
+        x, iterations = x0, first.iterations
+        for mu in SMOOTHING:
+            smooth = continuation(lambda lam, mu=mu: F_at(lam, mu), x, x_straight, solver.tol, solver.max_iter, solver.stages)
+            x = jnp.where(jnp.all(jnp.isfinite(smooth.x)), smooth.x, x)
+            iterations = iterations + smooth.iterations
+        found = continuation(F_at, x, x_straight, solver.tol, solver.max_iter, solver.stages)
+        return found._replace(iterations=iterations + found.iterations)
+
+    found = lax.cond(first.result == status.SUCCESS, lambda _: first, smoothed, None)
     return found.x, RootInfo(found.iterations, found.stages, found.result, found.jacobians)
 
 
@@ -218,7 +238,9 @@ def quick_root(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: Sol
         res, tip = shoot(robot, act, load, gravity, solver, x, F_c)
         return res, (tip.p, tip.R)
 
-    x, res, (p, R), steps, code = broyden(F, straight_rod(robot, act, load, gravity, F_c), QUICK_TOL * solver.tol, max_steps)
+    x, res, (p, R), steps, code = broyden(
+        F, straight_rod(robot, act, load, gravity, F_c, solver.steps), QUICK_TOL * solver.tol, max_steps
+    )
     return QuickRoot(x, res, p, R, steps, code)
 
 

@@ -14,6 +14,7 @@ from .inputs import GeneralActuation, Loads
 from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
 from .robot import Robot
+from .scene import Scene
 from .segments import Segment, State, rod_force, strains
 from .shooting import force_scale, root, segments, shoot, tip_compliance
 from .tree import pytree
@@ -39,8 +40,12 @@ class Solution:
         residual_norm: its max norm.
         iterations: Newton steps over all load stages.
         stages: load stages of the last ramp tried (one of SolverOptions.stages).
-        result: a ``tdct_jax.status`` code: SUCCESS (0), NEWTON_LIMIT, CONTINUATION_EXHAUSTED or
-            NONFINITE; ``message`` says what it means and what to do.
+        result: a ``tdct_jax.status`` code: SUCCESS (0), NEWTON_LIMIT, CONTINUATION_EXHAUSTED,
+            NONFINITE, and with a scene CONTACT_UNCONVERGED or PENETRATION; ``message`` says what
+            it means and what to do.
+        contact: with a scene (``solve(..., scene=)``), a ``contact.Contact``: candidates' arc
+            lengths, positions, gaps, normal forces, normals, the wrench on each obstacle and
+            which touch; None without one.
     """
 
     s: jax.Array
@@ -57,6 +62,7 @@ class Solution:
     iterations: jax.Array
     stages: jax.Array
     result: jax.Array
+    contact: object
 
     @property
     def converged(self):
@@ -113,14 +119,14 @@ def solution_at(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: So
 def _assembled(robot, act, load, gravity, solver, ys, res, info) -> Solution:
     """The Solution from a path ``ys`` as ``shoot`` (or ``multiple.path``) gives it, for either robot."""
     if isinstance(robot, GeneralRobot):
-        return _assemble_general(robot, act, load, gravity, ys, res, info)
+        return _assemble_general(robot, act, load, gravity, solver, ys, res, info)
     return _assemble(robot, act, solver, ys, res, info)
 
 
-def _assemble_general(robot, act, load, gravity, ys, res, info) -> Solution:
+def _assemble_general(robot, act, load, gravity, solver, ys, res, info) -> Solution:
     """Solution of a GeneralRobot: nodes interval by interval, steps + 1 each, so that both sides
     of every breakpoint appear (the node at an interval's start is after the breakpoint's jump)."""
-    nodes, pl, act, lengths, slack = ys
+    nodes, pl, act, lengths, slack, touching = ys
     s, y, (v, u, n, m) = general.node_quantities(robot, act, load, gravity, nodes, pl)
     # a slack tendon's tension is zero to round-off at the root (the Fischer-Burmeister row is
     # linear in it there): reported as exactly zero; a driven tendon's encoder reads its command
@@ -128,8 +134,9 @@ def _assemble_general(robot, act, load, gravity, ys, res, info) -> Solution:
     displacements = general.displacements(robot, act, lengths)
     if act.driven:
         displacements = displacements.at[np.asarray(act.driven)].set(act.displacements)
+    result = info.result if touching is None else status.contact_result(info.result, touching.gap, 2 * solver.tol * robot.length)
     return GeneralSolution(
-        s, y.p, y.R, n, m, y.N, y.M, v, u, res, jnp.max(jnp.abs(res)), info.iterations, info.stages, info.result,
+        s, y.p, y.R, n, m, y.N, y.M, v, u, res, jnp.max(jnp.abs(res)), info.iterations, info.stages, result, touching,
         tensions, displacements, slack,
     )  # fmt: skip
 
@@ -190,6 +197,7 @@ def _assemble(robot, act, solver, ys: State, res, info) -> Solution:
         iterations=info.iterations,
         stages=info.stages,
         result=info.result,
+        contact=None,
     )
 
 
@@ -202,6 +210,7 @@ def solve(
     solver: SolverOptions = DEFAULT_SOLVER,
     guess=None,
     throw: bool = True,
+    scene=None,
 ) -> Solution:
     """Static shape of the TDCT robot (paper Sec. II; docs/model.md) by Newton shooting.
 
@@ -225,6 +234,11 @@ def solve(
         throw: raise ConvergenceError when the solve did not converge (the default, as for every
             entry point; inside jit or vmap the check runs in the compiled program). With False,
             check ``sol.result`` / ``sol.converged``.
+        scene: obstacles the robot may touch (a ``tdct.Scene``; contact.py): frictionless
+            contact along the body and at the tip, reported in ``sol.contact``. It rides in the
+            Loads (``Loads.scene``), so derivatives in the obstacles' numbers and vmaps over them
+            pass through; a paper ``Robot`` is then solved as ``robot.to_general()`` (the same
+            solution to 1e-12). Single shooting only (``solver.intervals`` = 1).
 
     Returns:
         Solution.
@@ -233,7 +247,7 @@ def solve(
         ValueError: bad input (names field, value and allowed range).
         ConvergenceError: with ``throw``, the result code's message (what failed, what to do).
     """
-    sol = solution_and_compliance(*solve_arguments(robot, act, load, gravity, guess, solver))[0]
+    sol = solution_and_compliance(*solve_arguments(robot, act, load, gravity, guess, solver, scene))[0]
     check_solution(sol, solver, throw)
     return sol
 
@@ -252,9 +266,12 @@ def check_solution(sol: Solution, solver: SolverOptions, throw: bool, what: str 
     )
 
 
-def solve_arguments(robot, act, load, gravity, guess, solver) -> tuple:
+def solve_arguments(robot, act, load, gravity, guess, solver, scene=None) -> tuple:
     """Checks a single solve's arguments; returns those of ``solution_and_compliance``. A
-    GeneralRobot takes a GeneralActuation (or an Actuation, or None) and Loads (or a TipLoad)."""
+    GeneralRobot takes a GeneralActuation (or an Actuation, or None) and Loads (or a TipLoad); a
+    scene goes into the Loads (a Robot is then solved as its ``to_general()``)."""
+    if scene is not None:
+        robot, act, load = with_scene(robot, act, load, scene, solver)
     if isinstance(robot, GeneralRobot):
         act, load = GeneralActuation.of(act, robot.n_tubes), Loads.of(load)
         general.check_arguments(robot, act, load, solver)
@@ -268,6 +285,24 @@ def solve_arguments(robot, act, load, gravity, guess, solver) -> tuple:
     guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
     gravity, guess = _on_cpu(gravity_vector(gravity), guess)
     return robot, act, load, gravity, guess, solver
+
+
+def with_scene(robot, act, load, scene, solver) -> tuple:
+    """(GeneralRobot, GeneralActuation, Loads) with ``scene`` in the Loads, after its checks: a
+    Scene, the base outside every obstacle, single shooting."""
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a tdct.Scene, got {type(scene).__name__}")
+    if solver.intervals > 1:
+        raise ValueError(
+            f"solver intervals = {solver.intervals} with a scene: contact is solved by single shooting only; use intervals = 1"
+        )
+    if isinstance(robot, Robot):
+        robot, act = robot.to_general(), GeneralActuation.of(act, 1)
+    elif not isinstance(robot, GeneralRobot):
+        raise TypeError(f"robot must be a tdct.Robot or tdct.GeneralRobot, got {type(robot).__name__}")
+    if is_concrete(robot.sections[0].outer_diameter):
+        scene.check_base(float(robot.sections[0].outer_diameter) / 2)
+    return robot, act, Loads.of(load).with_scene(scene)
 
 
 def _on_cpu(*arrays):

@@ -4,6 +4,7 @@ jit and vmap), the message that says what to do about each, and the one place ``
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from .checks import is_concrete
@@ -23,6 +24,12 @@ UNREACHABLE = 5
 """Inverse kinematics: no input within the bounds puts the tip on the target; the nearest pose
 found is the answer (not a failure: ``throw`` does not raise for it). Load capacity: even the
 unloaded tip stays below the height (mass 0; ``throw`` raises, there is no capacity)."""
+CONTACT_UNCONVERGED = 6
+"""With a scene: Newton found no contact set (forces and gaps) that meets the tolerance."""
+PENETRATION = 7
+"""With a scene: converged, but the body lies inside an obstacle by more than 2 tol x L at a
+contact candidate (each candidate's Fischer-Burmeister row within tol holds its gap above -tol x L
+to first order: the check guards what is reported, not between candidates)."""
 
 NAMES = {
     SUCCESS: "converged",
@@ -31,6 +38,8 @@ NAMES = {
     NONFINITE: "non-finite residual",
     OUTER_LIMIT: "outer iteration limit reached",
     UNREACHABLE: "target unreachable",
+    CONTACT_UNCONVERGED: "contact set did not converge",
+    PENETRATION: "penetration beyond tolerance",
 }
 
 _ADVICE = {
@@ -51,6 +60,16 @@ _ADVICE = {
     ),
     OUTER_LIMIT: "{what} used its max_steps = {max_steps} without meeting its tolerance; {raise_max_steps}.",
     UNREACHABLE: "{unreachable}",
+    CONTACT_UNCONVERGED: (
+        "with the scene's obstacles, Newton did not bring the scaled residual ({residual_norm:.3g}; tip, and a "
+        "Fischer-Burmeister row per contact candidate and obstacle) below tol = {tol:g} ({iterations} steps in all, loads "
+        "ramped in up to {stages} stages). The contact set probably changes abruptly here (an obstacle grazing the body, "
+        "or pushing it past a snap): {contact_advice}."
+    ),
+    PENETRATION: (
+        "converged, but the body lies inside an obstacle by more than 2 tol x L at a contact candidate; tighten tol or "
+        "check that the obstacles leave the robot room (a robot pinned between obstacles cannot satisfy them all)."
+    ),
 }
 HINTS = {
     False: dict(
@@ -58,12 +77,15 @@ HINTS = {
         check_inputs="check the inputs and tol, or approach the configuration from a nearby converged solution (guess=)",
         raise_max_steps="raise max_steps or start nearer the answer",
         keep_failures="throw=False keeps them as result codes",
+        contact_advice="approach the configuration from a nearby converged solution (guess=), raise max_iter, or "
+        "refine the candidates (Scene(every=...)) or move the obstacle slightly",
     ),
     True: dict(
         raise_max_iter="Raise --max-iter",
         check_inputs="check the inputs (tensions, tip load, robot fields) and the spec's [solver] tol",
         raise_max_steps="raise --max-steps or start nearer the answer",
         keep_failures="their result codes are kept",
+        contact_advice="raise --max-iter, refine the candidates (the scene file's every) or move the obstacle slightly",
     ),
 }
 """What to do, in the words of the Python API (False) and of the ``tdct`` command line (True)."""
@@ -147,6 +169,14 @@ def _raise_first(result: np.ndarray, what: str, context: dict) -> None:
         return f"{said} did not converge{where}: {message(code, cli=cli, what=said, **values)}"
 
     raise ConvergenceError(text(False), code, text(True))
+
+
+def contact_result(result, gap, depth):
+    """A solve's code with a scene: a Newton failure (its limit, a stall) is CONTACT_UNCONVERGED;
+    a converged one with some gap below -depth [m] (2 tol x L) is PENETRATION."""
+    failed = (result == NEWTON_LIMIT) | (result == CONTINUATION_EXHAUSTED)
+    inside = (result == SUCCESS) & (jnp.min(gap) < -depth)
+    return jnp.where(failed, CONTACT_UNCONVERGED, jnp.where(inside, PENETRATION, result)).astype(result.dtype)
 
 
 def first_failure(codes) -> int:

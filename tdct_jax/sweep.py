@@ -41,7 +41,7 @@ from .options import DEFAULT_SOLVER, SolverOptions
 from .results import SweepChunk, SweepResult, part_path
 from .robot import Robot
 from .shooting import RootInfo, compliance_at, force_scale, quick_root, unscaled
-from .solve import check_inputs, solution_at, solve, tip_angle
+from .solve import check_inputs, solution_at, solve, tip_angle, with_scene
 
 INPUTS = ("tensions", "insertion", "force", "moment", "tip_mass")
 """A Robot sweep's input names besides its fields."""
@@ -125,13 +125,17 @@ class Points(NamedTuple):
     axes: dict | None  # the grid's axes, None for a batch
 
 
-def prepare(robot, act, load, grid, batch, *, gravity, solver, single=False, outputs: int = 0) -> Points:
+def prepare(robot, act, load, grid, batch, *, gravity, solver, single=False, outputs: int = 0, scene=None) -> Points:
     """Defaults for the base configuration, its checks, and the points of ``grid`` or ``batch``.
+
+    A ``scene`` goes into the base Loads (``solve.with_scene``; a Robot becomes its general form).
 
     With ``single`` and neither grid nor batch, the base configuration is the one point (shape ()).
     ``outputs``: bytes per point the caller keeps in memory (for ``check_points``).
     """
     robot = Robot() if robot is None else robot
+    if scene is not None:
+        robot, act, load = with_scene(robot, act, load, scene, solver)
     if isinstance(robot, GeneralRobot):
         act = GeneralActuation(np.zeros(robot.n_tendons), np.zeros(robot.n_tubes)) if act is None else act
         act, load = GeneralActuation.of(act, robot.n_tubes), Loads.of(load)
@@ -324,11 +328,15 @@ class _Plan(NamedTuple):
     first: int  # this process's first row
 
 
-def _plan(robot, act, load, grid, batch, warm_start, shapes, compliance, devices, gravity, solver, outputs=0) -> _Plan:
+def _plan(
+    robot, act, load, grid, batch, warm_start, shapes, compliance, devices, gravity, solver, outputs=0, scene=None
+) -> _Plan:
     """Checks a sweep's arguments and keeps this process's share of the rows (paths with warm
     starts): the k-th of ``jax.process_count()`` contiguous parts. ``outputs``: bytes per point
     kept in host memory besides the inputs (none when streamed)."""
-    base, points, shape, axes = prepare(robot, act, load, grid, batch, gravity=gravity, solver=solver, outputs=outputs)
+    base, points, shape, axes = prepare(
+        robot, act, load, grid, batch, gravity=gravity, solver=solver, outputs=outputs, scene=scene
+    )
     function = _solve_point
     if warm_start:
         if grid is None:
@@ -537,6 +545,7 @@ def sweep(
     gravity=STANDARD_GRAVITY,
     solver: SolverOptions = DEFAULT_SOLVER,
     throw: bool = True,
+    scene=None,
 ):
     """Solves many configurations at once: ``jax.vmap`` of ``tdct.solve`` in bounded chunks.
 
@@ -581,6 +590,9 @@ def sweep(
         throw: after the sweep (and after writing ``out``), raise ConvergenceError naming the
             first failed point and the number of failures, if any point failed (default, as for
             every entry point). With False, failures stay in ``result`` (per point) and ``n_failed``.
+        scene: obstacles (as for ``tdct.solve``), the same for every point. A Robot is then solved
+            as its ``to_general()``, so the grid takes the general names ("insertions", (k, 1)).
+            To vary an obstacle, vmap ``tdct.solve`` over its numbers (docs/contact.md).
 
     Returns:
         SweepResult, or with ``out`` the path written.
@@ -600,7 +612,7 @@ def sweep(
     if out is not None:
         check_output("out", out, suffixes=OUT_SUFFIXES, kind=OUT_KIND)
     kept = 0 if out is not None else _output_bytes(shapes, compliance, solver)
-    plan = _plan(robot, act, load, grid, batch, warm_start, shapes, compliance, devices, gravity, solver, kept)
+    plan = _plan(robot, act, load, grid, batch, warm_start, shapes, compliance, devices, gravity, solver, kept, scene)
     failures = _Failures()
     if out is not None:
         path, done_before = _write(plan, out, chunk_size, progress, overwrite, failures)

@@ -129,8 +129,8 @@ def test_shape_picture_numbers_are_quoted():
 
 @pytest.mark.parametrize("quote", list(quoted_solves()))
 def test_quoted_solve_output_matches_a_fresh_solve(quote):
-    """The numbers quoted beside a ``tdct solve`` command (docs/shape.png's among them) are what
-    solving those inputs gives now, to the three decimals printed."""
+    """The numbers quoted beside a ``tdct solve`` command (docs/shape.png's and docs/contact.png's
+    among them) are what solving those inputs gives now, to the three decimals printed."""
     args = cli._parser().parse_args(["solve", *shlex.split(quote["flags"])])
     plain = not args.set and not args.no_gravity and args.tip_force is None and not any(args.tip_moment)
     plain = plain and not (args.displacements_mm or args.insertions_mm or args.point_load)
@@ -138,7 +138,8 @@ def test_quoted_solve_output_matches_a_fresh_solve(quote):
     robot = tdct.Robot() if args.robot is None else tdct.Robot.from_toml(ROOT / args.robot)
     act = tdct.Actuation(args.tensions or (0.0,) * robot.n_tendons, (args.insertion_mm or 0.0) * 1e-3)
     load = tdct.TipLoad.from_mass((args.tip_mass_g or 0.0) * 1e-3)
-    sol = tdct.solve(robot, act, load, solver=tdct.SolverOptions(steps=args.steps, max_iter=args.max_iter))
+    scene = None if args.scene is None else tdct.read_scene(ROOT / args.scene)
+    sol = tdct.solve(robot, act, load, scene=scene, solver=tdct.SolverOptions(steps=args.steps, max_iter=args.max_iter))
     quoted = np.array([float(quote[k]) for k in ("x", "y", "z", "angle")])
     fresh = np.array([*(1e3 * np.asarray(sol.tip_position)), np.degrees(float(sol.tip_angle))])
     assert np.all(np.abs(fresh - quoted) <= 5e-4 + 1e-9), f"quoted {quoted}, a fresh solve gives {fresh.round(3)}"

@@ -56,6 +56,11 @@ def _problem(
     L = float(robot.length) if is_concrete(robot.length) else robot.length
     if is_general:
         load = Loads.of(load)
+        if load.scene is not None:
+            raise ValueError(
+                "load.scene is set: inverse kinematics with obstacles is not supported yet (the contact forces would be "
+                "more unknowns in every IK step); solve the forward problem with tdct.solve(..., scene=...)"
+            )
         base = GeneralActuation(np.zeros(n_t), np.zeros(n_tubes)) if guess is None else GeneralActuation.of(guess, n_tubes)
         general.check_arguments(robot, base, load, solver)
     else:
