@@ -12,7 +12,6 @@ covariance at the answer.
 
 from __future__ import annotations
 
-import dataclasses
 from functools import partial
 from typing import NamedTuple
 
@@ -31,7 +30,7 @@ from .mechanics import positions_at
 from .options import DEFAULT_SOLVER, SolverOptions
 from .robot import Robot
 from .solve import solve, with_scene
-from .tree import pytree
+from .tree import pytree, set_fields
 
 
 @pytree
@@ -42,8 +41,11 @@ class TipPose:
     rotation: object
 
     def __post_init__(self):
-        object.__setattr__(self, "position", as_array("tip position", self.position, (3,), unit=" m"))
-        object.__setattr__(self, "rotation", as_array("tip rotation", self.rotation, (3, 3)))
+        set_fields(
+            self,
+            position=as_array("tip position", self.position, (3,), unit=" m"),
+            rotation=as_array("tip rotation", self.rotation, (3, 3)),
+        )
 
 
 class ForceEstimate(NamedTuple):
@@ -81,20 +83,10 @@ class ForceEstimate(NamedTuple):
         return float(np.linalg.norm(self.force))
 
 
-def _with_force(load: Loads, s, F) -> Loads:
-    """``load`` with one more point force F [N] at s [m]."""
-    return dataclasses.replace(
-        load,
-        point_s=jnp.concatenate([jnp.asarray(load.point_s, float), jnp.reshape(s, (1,))]),
-        point_force=jnp.concatenate([jnp.reshape(load.point_force, (-1, 3)), F[None]]),
-        point_moment=jnp.concatenate([jnp.reshape(load.point_moment, (-1, 3)), jnp.zeros((1, 3))]),
-    )
-
-
 def _deviation(robot, act, load, gravity, solver, measured, noise, axial, x):
     """The residual (model minus measured, over the noise) at x = (s_F, F), and the result code;
     with ``axial`` one more row: F's component along the body axis d3(s_F) over noise[2]."""
-    sol = solve(robot, act, _with_force(load, x[0], x[1:]), gravity=gravity, solver=solver, throw=False)
+    sol = solve(robot, act, load.with_point(x[0], x[1:]), gravity=gravity, solver=solver, throw=False)
     rows = []
     if axial:
         d3 = sol.rotation[jnp.argmin(jnp.abs(sol.s - x[0])), :, 2]
@@ -264,10 +256,10 @@ def synthesize(
     L = float(general.length)
     F = np.zeros(3)
     for _ in range(sweeps):
-        sol = solve(general, act, _with_force(load, jnp.asarray(s, float), jnp.asarray(F)), gravity=gravity, solver=solver)
+        sol = solve(general, act, load.with_point(jnp.asarray(s, float), jnp.asarray(F)), gravity=gravity, solver=solver)
         R = np.asarray(sol.rotation[np.argmin(np.abs(np.asarray(sol.s) - s))])
         F = magnitude * (R @ np.array([np.cos(angle), np.sin(angle), 0.0]))
-    sol = solve(general, act, _with_force(load, jnp.asarray(s, float), jnp.asarray(F)), gravity=gravity, solver=solver)
+    sol = solve(general, act, load.with_point(jnp.asarray(s, float), jnp.asarray(F)), gravity=gravity, solver=solver)
     s_m = L * np.arange(1, points + 1) / points
     p = np.asarray(positions_at(sol, s_m))
     if rng is not None:

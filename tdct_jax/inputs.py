@@ -145,6 +145,18 @@ class Loads:
         fields = {name: getattr(self, name) for name in self.__dataclass_fields__}
         return unchecked(Loads, **(fields | dict(scene=scene)))
 
+    def with_point(self, s, force, moment=None) -> Loads:
+        """These loads with one more point load: force [N] (3,) and moment [N m] (3,), default
+        none, at arc length s [m] (values may be traced)."""
+        moment = jnp.zeros(3) if moment is None else moment
+        fields = {name: getattr(self, name) for name in self.__dataclass_fields__}
+        point = dict(
+            point_s=jnp.append(jnp.asarray(self.point_s, float), s),
+            point_force=jnp.concatenate([jnp.reshape(self.point_force, (-1, 3)), jnp.reshape(force, (1, 3))]),
+            point_moment=jnp.concatenate([jnp.reshape(self.point_moment, (-1, 3)), jnp.reshape(moment, (1, 3))]),
+        )
+        return unchecked(Loads, **(fields | point))
+
     def scaled(self, lam) -> Loads:
         """Every load times lam (the solver's load continuation); the scene as it is."""
         scaled = {name: lam * getattr(self, name) for name in ("tip_force", "tip_moment", "point_force", "point_moment")}

@@ -25,7 +25,6 @@ from .options import DEFAULT_SOLVER, SolverOptions
 from .robot import Robot
 from .so3 import rotation_columns
 from .solve import GeneralSolution, check_solution, solution_and_compliance, solve, solve_arguments
-from .tree import unchecked
 
 
 def compliance(
@@ -89,19 +88,7 @@ def _compliance_at(robot, act, load, gravity, guess, s, solver):
     """(d(position, rotation vector at s) / d(point force, moment at s), Solution) of a GeneralRobot."""
 
     def pose(w):
-        point = dict(
-            point_s=jnp.append(load.point_s, s),
-            point_force=jnp.concatenate([jnp.reshape(load.point_force, (-1, 3)), w[None, :3]]),
-            point_moment=jnp.concatenate([jnp.reshape(load.point_moment, (-1, 3)), w[None, 3:]]),
-        )
-        loads = unchecked(
-            Loads,
-            tip_force=load.tip_force,
-            tip_moment=load.tip_moment,
-            distributed_force=load.distributed_force,
-            scene=load.scene,
-            **point,
-        )
+        loads = load.with_point(s, w[:3], w[3:])
         sol = solution_and_compliance(robot, act, loads, gravity, guess, solver)[0]
         i = jnp.searchsorted(sol.s, s, side="right") - 1  # a node lies at s: it is a breakpoint
         return (sol.position[i], sol.rotation[i]), (sol, sol.rotation[i])
