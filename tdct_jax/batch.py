@@ -17,14 +17,15 @@ from tqdm import tqdm
 from . import status
 from .checks import check_integer
 
-CHUNK_SIZES = {"cpu": 128, "gpu": 8192}
+CHUNK_SIZES = {"cpu": 128, "gpu": 65536}
 """Default configurations per device per compiled call, by device platform (``chunk_size=``, the
 total per call, overrides; a smaller batch rounds up to a power of two; other platforms take the
 cpu value). cpu: measured for the engine on the 2-core CPU (benchmarks/sweep_throughput.py,
 2026-11-25, 2,048 points): 128 lanes per device was the fastest or within the noise of it, on one
 device (804 solves/s; 64: 670, 256: 738, 512: 458) and on two (chunks of 256: 1,576; 512: 1,584;
-128: 1,525). gpu: provisional, near the best batch of a batch-last prototype on one H100
-(benchmarks/README.md), until benchmarks/gpu_throughput.py measures it."""
+128: 1,525). gpu: measured on one H100 (benchmarks/gpu_throughput.py, 2026-11-26): 10^6 points
+streamed at 45,200 solves/s with 65,536 lanes (262,144: 44,700; on 131,072 points 32,768: 41,800,
+8,192: 23,700, 2,048: 10,000), 301 MB of GPU memory at its peak."""
 FIRST_PASS = 12
 """Quasi-Newton steps each lane gets in a chunk's first pass, for kernels that allow it
 (``Kernel.retire``): one Jacobian pass, then Broyden updates, one integration per step, no load
