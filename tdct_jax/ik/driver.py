@@ -80,7 +80,7 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
     def step(c):
         phase, k, best, sqp = c.phase, c.k, c.best, c.sqp
         reaching, optimising = phase == REACH, phase == OPTIMISE
-        grid = _lazily(reaching & (k == 1), lambda: nearest_on_grid(prob, plan), v0)
+        grid = _lazily(reaching & (k == 1), lambda prob: nearest_on_grid(prob, plan), v0, prob)
         v = jnp.where(k == 1, grid, candidates[jnp.clip(k - 1, 0, len(candidates) - 1)])
         guess = jnp.where(k == 0, wrench0, jnp.nan)
         if sqp is not None:  # phase 2's trial point
@@ -90,11 +90,11 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
         # a warm update's wrench0 is the converged solve at v0
         skip = warm & (k == 0) & reaching
         solving = (reaching & ~skip) | (phase == CLOSE) | (optimising & shared)
-        x, info = _lazily(solving, lambda: root(*problem, guess, prob.solver), (c.x, c.info))
+        x, info = _lazily(solving, lambda problem, guess: root(*problem, guess, prob.solver), (c.x, c.info), problem, guess)
         wrench = jnp.where(skip, wrench0, unscaled(prob.robot, x, force_scale(*problem)))
         code = jnp.where(skip, status.SUCCESS, info.result).astype(jnp.int32)
 
-        def reached():
+        def reached(v, wrench):
             r = reach(v, wrench, k == 0)
             r = r._replace(code=jnp.where(code == status.SUCCESS, r.code, code))
             rank, best_rank = (
@@ -103,16 +103,16 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
             closer = (rank < best_rank) | ((rank == best_rank) & (r.e @ r.e < best.e @ best.e))
             return jax.tree.map(lambda a, b: jnp.where(closer, a, b), r, best), c.steps + r.steps
 
-        best, steps = _lazily(reaching, reached, (best, c.steps))
+        best, steps = _lazily(reaching, reached, (best, c.steps), v, wrench)
         k = jnp.where(reaching, k + 1, k)
         phase = jnp.where(reaching, after_reach(k, best), jnp.where(phase == CLOSE, DONE, phase))
         if sqp is not None:
 
-            def optimised():
+            def optimised(v, x, info, guess):
                 trial = evaluate_at(v, x, info, prob, plan) if shared else evaluate(v, guess, prob, plan)
                 return sqp_step(sqp, trial, prob)
 
-            sqp = _lazily(optimising, optimised, sqp)
+            sqp = _lazily(optimising, optimised, sqp, v, x, info, guess)
             # phase 2 starts where phase 1 reached the target
             sqp = _where(reaching & (phase == OPTIMISE), sqp_start(best.v, best.wrench, prob), sqp)
             ended = optimising & sqp.done
@@ -124,7 +124,7 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
         return Tried(phase, k, best, steps, x, info, sqp, c.i)
 
     def body(c):  # a pass once DONE costs one test
-        return _lazily(c.phase != DONE, lambda: step(c), c)._replace(i=c.i + 1)
+        return _lazily(c.phase != DONE, step, c, c)._replace(i=c.i + 1)
 
     n = jnp.shape(wrench0)[0]
     none = Reach(v0, jnp.full(n, jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT), cold)
