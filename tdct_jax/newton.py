@@ -163,3 +163,17 @@ def continuation(F_at, x0, x_ramp, tol, max_iter, stages=(1, 4, 16), solve=newto
     x, r, it, J, ramp, _, _, code = lax.while_loop(not_done, body, init)
     code = jnp.where(code == _STALLED, status.CONTINUATION_EXHAUSTED, code).astype(jnp.int32)
     return Root(x, r, J, it, ramps[ramp], code)
+
+
+def lazily(needed, f, otherwise, *operands):
+    """f(*operands) where ``needed``, else ``otherwise``: a while loop of at most one pass rather
+    than ``lax.cond``, so that under ``vmap`` f runs only when some lane needs it. f's work must
+    depend on ``operands``, which pass an optimisation barrier tied to the loop's flag: what f
+    reads only from its closure is invariant in this loop, and XLA hoists such work out of it
+    (under ``vmap`` the grid start's coarse solves then ran for every lane of every chunk of a
+    batched IK, 3 times the time of the rest)."""
+
+    def body(c):
+        return jnp.zeros_like(c[0]), f(*lax.optimization_barrier((c[0], operands))[1])
+
+    return lax.while_loop(lambda c: c[0], body, (needed, otherwise))[1]

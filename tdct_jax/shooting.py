@@ -20,7 +20,7 @@ from .contact import SMOOTHING
 from .description import GeneralRobot
 from .integrate import rk4
 from .loads import Actuation, TipLoad
-from .newton import broyden, continuation
+from .newton import broyden, continuation, lazily
 from .options import SolverOptions
 from .robot import Robot
 from .segments import E3, Segment, State, paper_transition, vector_field
@@ -196,7 +196,7 @@ def _root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: S
     # the exact one, each from the last root, each with the load continuation
     first = continuation(F_at, x0, x_straight, solver.tol, solver.max_iter, (1,))
 
-    def smoothed(_):
+    def smoothed(x0, x_straight):
         x, iterations = x0, first.iterations
         for mu in SMOOTHING:
             smooth = continuation(lambda lam, mu=mu: F_at(lam, mu), x, x_straight, solver.tol, solver.max_iter, solver.stages)
@@ -205,7 +205,7 @@ def _root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: S
         found = continuation(F_at, x, x_straight, solver.tol, solver.max_iter, solver.stages)
         return found._replace(iterations=iterations + found.iterations)
 
-    found = lax.cond(first.result == status.SUCCESS, lambda _: first, smoothed, None)
+    found = lazily(first.result != status.SUCCESS, smoothed, first, x0, x_straight)
     return found.x, RootInfo(found.iterations, found.stages, found.result, found.jacobians)
 
 

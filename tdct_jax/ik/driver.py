@@ -13,13 +13,14 @@ from jax import lax
 
 from .. import status
 from ..inputs import GeneralActuation
+from ..newton import lazily
 from ..shooting import RootInfo, at_root, force_scale, root, tip_compliance, unscaled, unset_info
 from ..solve import solution_and_compliance, solution_at
 from .evaluation import evaluate, evaluate_at
 from .objectives import objective_value
 from .optimise import SQPState, sqp_start, sqp_step
 from .problem import IKResult, Plan, Problem, _wrench, actuation_of, pose_errors
-from .reach import Model, Reach, _lazily, _usable, _where, no_model, reach_augmented, reach_nested
+from .reach import Model, Reach, _usable, _where, no_model, reach_augmented, reach_nested
 from .starts import STARTS, nearest_on_grid, starts
 
 
@@ -80,7 +81,7 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
     def step(c):
         phase, k, best, sqp = c.phase, c.k, c.best, c.sqp
         reaching, optimising = phase == REACH, phase == OPTIMISE
-        grid = _lazily(reaching & (k == 1), lambda prob: nearest_on_grid(prob, plan), v0, prob)
+        grid = lazily(reaching & (k == 1), lambda prob: nearest_on_grid(prob, plan), v0, prob)
         v = jnp.where(k == 1, grid, candidates[jnp.clip(k - 1, 0, len(candidates) - 1)])
         guess = jnp.where(k == 0, wrench0, jnp.nan)
         if sqp is not None:  # phase 2's trial point
@@ -90,7 +91,7 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
         # a warm update's wrench0 is the converged solve at v0
         skip = warm & (k == 0) & reaching
         solving = (reaching & ~skip) | (phase == CLOSE) | (optimising & shared)
-        x, info = _lazily(solving, lambda problem, guess: root(*problem, guess, prob.solver), (c.x, c.info), problem, guess)
+        x, info = lazily(solving, lambda problem, guess: root(*problem, guess, prob.solver), (c.x, c.info), problem, guess)
         wrench = jnp.where(skip, wrench0, unscaled(prob.robot, x, force_scale(*problem)))
         code = jnp.where(skip, status.SUCCESS, info.result).astype(jnp.int32)
 
@@ -103,7 +104,7 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
             closer = (rank < best_rank) | ((rank == best_rank) & (r.e @ r.e < best.e @ best.e))
             return jax.tree.map(lambda a, b: jnp.where(closer, a, b), r, best), c.steps + r.steps
 
-        best, steps = _lazily(reaching, reached, (best, c.steps), v, wrench)
+        best, steps = lazily(reaching, reached, (best, c.steps), v, wrench)
         k = jnp.where(reaching, k + 1, k)
         phase = jnp.where(reaching, after_reach(k, best), jnp.where(phase == CLOSE, DONE, phase))
         if sqp is not None:
@@ -112,7 +113,7 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
                 trial = evaluate_at(v, x, info, prob, plan) if shared else evaluate(v, guess, prob, plan)
                 return sqp_step(sqp, trial, prob)
 
-            sqp = _lazily(optimising, optimised, sqp, v, x, info, guess)
+            sqp = lazily(optimising, optimised, sqp, v, x, info, guess)
             # phase 2 starts where phase 1 reached the target
             sqp = _where(reaching & (phase == OPTIMISE), sqp_start(best.v, best.wrench, prob), sqp)
             ended = optimising & sqp.done
@@ -124,7 +125,7 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
         return Tried(phase, k, best, steps, x, info, sqp, c.i)
 
     def body(c):  # a pass once DONE costs one test
-        return _lazily(c.phase != DONE, step, c, c)._replace(i=c.i + 1)
+        return lazily(c.phase != DONE, step, c, c)._replace(i=c.i + 1)
 
     n = jnp.shape(wrench0)[0]
     none = Reach(v0, jnp.full(n, jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT), cold)
