@@ -1,7 +1,7 @@
 """GPU sweeps: solves per second against batch and chunk size, compile time, peak GPU and host
-memory, and the tips' agreement with the CPU.
+memory, the tips' agreement with the CPU, and (``--ik``) batched inverse kinematics.
 
-Run: python benchmarks/gpu_throughput.py [--quick] [--batches ...] [--chunks ...]
+Run: python benchmarks/gpu_throughput.py [--quick] [--batches ...] [--chunks ...] [--ik N ...]
 Where JAX sees a GPU, writes benchmarks/results/gpu_throughput.json (_quick.json with --quick)
 naming the device; where it sees none, says so and writes nothing (exit 0), so run_all.py runs
 it everywhere. Configurations are sweep_throughput.py's random envelope. Each figure is the
@@ -104,6 +104,33 @@ def agreement(devices, n: int) -> dict:
     )
 
 
+def ik_rows(sizes, repeats: int) -> list[dict]:
+    """Batched inverse kinematics on the default backend: targets are the envelope's forward tips,
+    each with its own tip load; first call (compile included) and the median of warm calls."""
+    rows = []
+    for n in sizes:
+        points = envelope(n, seed=2)
+        tips = tdct.sweep(batch=points, progress=False).tip_position
+        loads = tdct.TipLoad.from_mass(points["tip_mass"])
+
+        def run(tips=tips, loads=loads):
+            return jax.block_until_ready(tdct.inverse_kinematics(tdct.Robot(), tdct.Target(tips), load=loads, throw=False))
+
+        t = time.perf_counter()
+        result = run()
+        first = time.perf_counter() - t
+        times = []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            run()
+            times.append(time.perf_counter() - t)
+        median = float(np.median(times))
+        reached = (np.asarray(result.result) == tdct.status.SUCCESS) & (np.asarray(result.position_error) <= 1e-9)
+        rows.append(dict(targets=n, first_call_s=first, median_s=median, targets_per_s=n / median, reached=float(reached.mean())))
+        print(rows[-1], flush=True)
+    return rows
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="batches up to 10^4, two chunk sizes, one repeat")
@@ -112,6 +139,7 @@ def main() -> int:
     parser.add_argument("--chunks", type=int, nargs="+", help="chunk sizes to scan")
     parser.add_argument("--chunk-batch", type=int, help="points per sweep in the chunk scan")
     parser.add_argument("--platform", default="gpu", help="JAX platform to measure (default gpu)")
+    parser.add_argument("--ik", type=int, nargs="*", default=[], help="also batched IK over this many targets each")
     parser.add_argument("--out", type=Path, help="results file (default results/gpu_throughput[_quick].json)")
     args = parser.parse_args()
     try:
@@ -131,6 +159,7 @@ def main() -> int:
         for b in batches:
             rows.append(dict(kind="batch", **measure(b, None, devices, repeats, Path(folder))))
             print(rows[-1], flush=True)
+    ik = ik_rows(args.ik, repeats) if args.ik else None
     agree = agreement(devices, AGREEMENT_POINTS) if args.platform != "cpu" else None
     print(f"agreement with the CPU: {agree}")
     best = max(r["solves_per_s"] for r in rows if r["kind"] == "chunk")
@@ -144,6 +173,7 @@ def main() -> int:
         best_chunk_solves_per_s=best,
         rows=rows,
         cpu_agreement=agree,
+        ik=ik,
     )
     print(f"{'kind':<6} {'points':>8} {'lanes':>6} {'solves/s':>10} {'compile s':>9} {'GPU peak MB':>11} {'host peak MB':>12}")
     for r in rows:
