@@ -15,6 +15,7 @@ from conftest import rel_err
 import tdct_jax as tdct
 from tdct_jax import shooting
 from tdct_jax.loads import gravity_vector
+from tdct_jax.newton import lazily
 
 
 def envelope(n, seed=0):
@@ -106,6 +107,26 @@ def test_newton_pass_loops_run_in_sequence(paper_case):
     hlo = jax.jit(jacobian).lower(robot, act, load, g, x).compile().as_text()
     assert "while" in hlo
     assert _large_arrays_in_loops(hlo, SEQUENTIAL_BYTES) == []
+
+
+def test_lazily_keeps_its_branch_inside_its_loop_under_vmap():
+    """XLA hoists loop-invariant work out of a while loop. ``lazily``'s branch read only values
+    invariant in its one-pass loop, so under vmap it ran before the loop whether or not a lane
+    needed it (a batched IK ran the grid start's coarse solves for every lane, 3-4x its time):
+    the compiled program must hold the branch's work inside the loop, not in its entry."""
+
+    def g(needed, x, y):
+        def branch(y):
+            with jax.named_scope("lazily_branch"):
+                return jnp.cos(y) ** 2 + 1.0
+
+        return lazily(needed, branch, x, y)
+
+    args = (jnp.array([True, False]), jnp.ones(2), jnp.full(2, 0.5))
+    hlo = jax.jit(jax.vmap(g)).lower(*args).compile().as_text()
+    assert "lazily_branch" in hlo
+    assert "lazily_branch" not in hlo[hlo.index("\nENTRY") :]
+    np.testing.assert_allclose(jax.jit(jax.vmap(g))(*args), [math.cos(0.5) ** 2 + 1.0, 1.0], rtol=1e-15)
 
 
 @pytest.mark.slow
