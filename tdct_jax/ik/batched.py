@@ -24,6 +24,12 @@ Targets that miss from their first start run again from every start, padded to t
 as to reuse the compiled program: a round trip over 1,000 targets took 81 s at 256 lanes against
 55 s at 64 (tests/test_ik.py, compile included); with the grid start since, 51 s at 64 (quiet,
 2026-11-26)."""
+RETRY_LANES = 1024
+"""Lanes per compiled call of the retry pass at most: it reuses the first pass's program where
+that has no more lanes (the CPU's 64), and otherwise compiles one of this size. A vmapped retry
+costs what its lanes cost, not its misses: on one H100, 30 misses padded to the first pass's
+8,192 lanes took 37 s, 4 misses over 1,024 lanes 2.3 s; on the CPU with 256-lane chunks, one miss
+over 256 lanes 71 s, over 32 lanes 10 s (benchmarks/README.md)."""
 
 
 def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
@@ -43,10 +49,11 @@ def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
     chunk = CHUNK_SIZE if jax.default_backend() == "cpu" else default_chunk_size()
     out = run_batched(kernel, base, points | {"starts": np.ones(len(v0), np.int32)}, chunk_size=chunk, progress=False)
     again = np.flatnonzero(out[".result"] != status.SUCCESS)
-    if again.size:  # padded to the first pass's chunk, whose compiled program it reuses
-        rows = np.concatenate([again, np.full(max(lanes_per_call(len(v0), chunk) - again.size, 0), again[-1])])
+    if again.size:  # padded to whole calls of ``lanes``, the first pass's where it has no more than RETRY_LANES
+        lanes = min(lanes_per_call(len(v0), chunk), RETRY_LANES)
+        rows = np.concatenate([again, np.full(-again.size % lanes, again[-1])])
         retry = {k: v[rows] for k, v in points.items()} | {"starts": np.full(rows.size, STARTS, np.int32)}
-        for k, v in run_batched(kernel, base, retry, chunk_size=chunk, progress=False).items():
+        for k, v in run_batched(kernel, base, retry, chunk_size=lanes, progress=False).items():
             out[k][again] = v[: again.size]
     shape = jax.eval_shape(
         lambda: _solve_ik(_one(prob, jax.tree.map(lambda a: a[0] if jnp.ndim(a) else a, per)), v0[0], wrench0, plan)[0]
