@@ -24,7 +24,7 @@ from pathlib import Path
 
 import jax
 import numpy as np
-from _common import write_result
+from _common import timings, write_result
 from sweep_throughput import envelope
 
 import tdct_jax as tdct
@@ -119,12 +119,7 @@ def ik_rows(sizes, repeats: int) -> list[dict]:
         t = time.perf_counter()
         result = run()
         first = time.perf_counter() - t
-        times = []
-        for _ in range(repeats):
-            t = time.perf_counter()
-            run()
-            times.append(time.perf_counter() - t)
-        median = float(np.median(times))
+        median = float(np.median(timings(run, repeats)))
         reached = (np.asarray(result.result) == tdct.status.SUCCESS) & (np.asarray(result.position_error) <= 1e-9)
         rows.append(dict(targets=n, first_call_s=first, median_s=median, targets_per_s=n / median, reached=float(reached.mean())))
         print(rows[-1], flush=True)
