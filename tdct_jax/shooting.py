@@ -254,16 +254,24 @@ def _root_jvp(primals, tangents):
 
 
 def _implicit(robot, act, load, gravity, solver, x, J, tangents):
-    """The tangent of the root x (Newton's d residual / dx there: J) for the inputs' tangents."""
-    J = jacobian_at_root(robot, act, load, gravity, solver, x, J)
+    """The tangent of the root x (Newton's d residual / dx there: J, or NaN to take it here) for
+    the inputs' tangents."""
+    J = lax.cond(
+        jnp.all(jnp.isfinite(J)),
+        lambda x, J: jacobian_at_root(robot, act, load, gravity, solver, x, J),
+        lambda x, J: jax.jacfwd(lambda x: residual(robot, act, load, gravity, solver, x))(x),
+        x,
+        J,
+    )
     _, dF = jax.jvp(lambda r, a, l, g: residual(r, a, l, g, solver, x), (robot, act, load, gravity), tangents)
     return -jnp.linalg.solve(J, dF)
 
 
 @jax.custom_jvp
 def at_root(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x, J):
-    """x, a root that ``root`` found elsewhere (its RootInfo's d residual / dx: J), with ``root``'s
-    implicit derivatives in the inputs: a root found inside another loop is differentiable."""
+    """x, a root that ``root`` found elsewhere (its RootInfo's d residual / dx: J; NaN where none
+    was taken there: then taken when differentiated), with ``root``'s implicit derivatives in the
+    inputs: a root found inside another loop is differentiable."""
     return x
 
 

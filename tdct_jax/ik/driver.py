@@ -14,13 +14,13 @@ from jax import lax
 from .. import status
 from ..inputs import GeneralActuation
 from ..newton import lazily
-from ..shooting import RootInfo, at_root, force_scale, root, tip_compliance, unscaled, unset_info
+from ..shooting import RootInfo, at_root, force_scale, root, scaled, tip_compliance, unscaled, unset_info
 from ..solve import solution_and_compliance, solution_at
 from .evaluation import evaluate, evaluate_at
 from .objectives import objective_value
 from .optimise import SQPState, sqp_start, sqp_step
 from .problem import IKResult, Plan, Problem, _wrench, actuation_of, pose_errors
-from .reach import Model, Reach, _usable, _where, no_model, reach_augmented, reach_nested
+from .reach import Model, Reach, _usable, _where, no_model, reach_augmented, reach_nested, refreshed
 from .starts import STARTS, nearest_on_grid, starts
 
 
@@ -30,8 +30,10 @@ class Found(NamedTuple):
     steps: jax.Array
     code: jax.Array
     model: Model  # phase 1's last linearisation (``Model``; tip NaN)
-    x: jax.Array  # the closing forward solve at v: scaled unknowns (unset with multiple shooting)
-    info: RootInfo  # and its RootInfo
+    chords: jax.Array  # how many of the steps were chord steps
+    x: jax.Array  # the forward solve at v, scaled unknowns: the closing one, or phase 1's where it
+    # reached (unset with multiple shooting)
+    info: RootInfo  # and its RootInfo (phase 1's: no Jacobians, NaN)
 
 
 REACH, OPTIMISE, CLOSE, DONE = range(4)
@@ -55,27 +57,29 @@ class Tried(NamedTuple):
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(5,))
-def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Found:
+def find(prob: Problem, v0, wrench0, n_starts, model: Model | None, plan: Plan) -> Found:
     """The IK solution in scaled inputs (see the module docstring), from v0 (and the converged or
-    NaN base wrench there; with a usable ``model`` at v0, a warm update from it), then from the
+    NaN base wrench there; with a usable ``model`` at v0, a warm update from it; None: no warm
+    update compiled), then from the
     grid start (``nearest_on_grid``) and ``starts`` until one reaches (the nearest pose of them
     all otherwise), then phase 2 a step a pass, then the forward solve at the answer: one loop
     whose passes share one forward solve in the compiled program. Its derivatives by implicit
     differentiation (``_find_jvp``)."""
     candidates = starts(v0, prob, plan)
     cold = no_model(prob, plan)
-    warm = _usable(model)
+    warm = False if model is None else _usable(model)
     closing = prob.solver.intervals == 1  # multiple shooting: ``_solve_ik`` solves at the answer itself
     shared = not callable(plan.objective)  # a user's objective: phase 2 solves through the Solution
 
     def reach(v, wrench, first):
         if plan.method == "nested":
             return reach_nested(v, wrench, prob, plan)._replace(model=cold)
-        return reach_augmented(v, wrench, prob, plan, _where(first, model, cold))
+        return reach_augmented(v, wrench, prob, plan, None if model is None else _where(first, model, cold))
 
     def after_reach(k, best):
         more = (k < n_starts) & (best.code != status.SUCCESS)
-        ends = OPTIMISE if plan.objective is not None else CLOSE
+        # phase 1 reaches at a converged forward solve: without an objective, the answer
+        ends = OPTIMISE if plan.objective is not None else DONE
         return jnp.where(more, REACH, jnp.where(best.code == status.SUCCESS, ends, CLOSE))
 
     def step(c):
@@ -117,7 +121,7 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
             # phase 2 starts where phase 1 reached the target
             sqp = _where(reaching & (phase == OPTIMISE), sqp_start(best.v, best.wrench, prob), sqp)
             ended = optimising & sqp.done
-            best = _where(ended, sqp.result(best.steps)._replace(model=best.model), best)
+            best = _where(ended, sqp.result(best.steps)._replace(model=best.model, chords=best.chords), best)
             steps = jnp.where(ended, steps + sqp.it - 1, steps)
             phase = jnp.where(ended, CLOSE, phase)
         if not closing:
@@ -138,8 +142,13 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model, plan: Plan) -> Foun
     # cost that grows with the body's size)
     passes = n_starts + 1 + (0 if plan.objective is None else prob.options.max_steps + 1)
     tried = lax.while_loop(lambda c: c.i < passes, body, init)
-    r = tried.best
-    return Found(r.v, r.wrench, tried.steps, r.code, r.model, tried.x, tried.info)
+    r, x, info = tried.best, tried.x, tried.info
+    if closing and plan.objective is None:  # reached: its root, no closing solve (``at_root`` takes J)
+        F_c = force_scale(prob.robot, actuation_of(r.v, prob, plan), prob.load, prob.gravity)
+        nan = jnp.full((n, n), jnp.nan), (jnp.full((3, n), jnp.nan), jnp.full((3, 3, n), jnp.nan))
+        reached = (scaled(prob.robot, r.wrench, F_c), RootInfo(0, 1, jnp.int32(status.SUCCESS), nan))
+        x, info = _where(r.code == status.SUCCESS, reached, (x, info))
+    return Found(r.v, r.wrench, tried.steps, r.code, r.model, r.chords, x, info)
 
 
 @find.defjvp
@@ -181,7 +190,7 @@ def _find_jvp(plan, primals, tangents):
         rhs = jnp.concatenate([-(dL + W @ dv_bound) * F, -rhs_e])
         dv = jnp.linalg.solve(K, rhs)[:n]
     dv = jnp.where(free, dv, dv_bound)
-    zero = jax.tree.map(_zero_like, (wrench, found.steps, found.code, found.model, found.x, found.info))
+    zero = jax.tree.map(_zero_like, (wrench, found.steps, found.code, found.model, found.chords, found.x, found.info))
     return found, Found(dv, *zero)
 
 
@@ -194,7 +203,6 @@ def _zero_like(x):
 def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, n_starts=STARTS, model=None):
     """``find`` (warm from ``model``, a Model at v0, when given), then the forward solve there and
     the result's numbers; (IKResult, wrench, the Model for the next warm update)."""
-    model = no_model(prob, plan) if model is None else model
     found = find(prob, v0, wrench0, n_starts, model, plan)
     act = actuation_of(found.v, prob, plan)
     problem = (prob.robot, act, prob.load, prob.gravity)
@@ -209,5 +217,8 @@ def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, n_starts=STARTS, model=
     position, orientation = pose_errors(sol.tip_position, sol.tip_rotation, prob.target)
     phi = jnp.nan if plan.objective is None else objective_value(sol, C, act, prob, plan)
     code = jnp.where(sol.result == status.SUCCESS, found.code, sol.result).astype(jnp.int32)
-    result = IKResult(act, sol, position, orientation, jnp.asarray(phi, float), found.steps, code)
-    return result, _wrench(sol, act), found.model._replace(tip_position=sol.tip_position, tip_rotation=sol.tip_rotation)
+    result = IKResult(act, sol, position, orientation, jnp.asarray(phi, float), found.steps, found.chords, code)
+    model = found.model._replace(tip_position=sol.tip_position, tip_rotation=sol.tip_rotation)
+    if prob.solver.intervals == 1:
+        model = refreshed(model, J_res, J_p, J_R, prob)
+    return result, _wrench(sol, act), model

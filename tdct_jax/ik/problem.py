@@ -140,6 +140,8 @@ class IKResult:
         orientation_error: angle between tip and target orientation [rad] (0 without one).
         objective: the objective's value there (NaN without one).
         iterations: IK steps taken.
+        chord_steps: how many of them were chord steps: a warm update's (``track``), each one
+            evaluation of the model with no Jacobian pass, about a quarter of a full step's cost.
         result: a ``tdct_jax.status`` code: SUCCESS (reached), UNREACHABLE (the nearest pose
             found is returned, ``position_error`` away), OUTER_LIMIT, or the forward solve's own.
     """
@@ -150,6 +152,7 @@ class IKResult:
     orientation_error: jax.Array
     objective: jax.Array
     iterations: jax.Array
+    chord_steps: jax.Array
     result: jax.Array
 
     @property

@@ -7,9 +7,12 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 
 from .. import status
+from ..linalg import solve_spd
+from ..newton import lazily
 from ..qp import box_qp
 from ..shooting import force_scale, scaled, shoot, unscaled
 from .evaluation import Evaluation, evaluate, unset
@@ -25,6 +28,10 @@ MU_GIVE_UP = 1e10
 """Damping at which a phase stops: no step it could take lowers its merit."""
 
 
+CHORD = 0.5
+"""A warm update's chord step (``reach_augmented``) is kept when it shrinks |(r, e)| at least this
+much; one that does not ends the chord steps."""
+
 STALLED = 1e-10
 """An accepted phase-1 step that lowers |e|^2 by less than this, relatively, ends phase 1."""
 STATIONARY = 1e-7
@@ -34,9 +41,14 @@ below this, relative to |G| |e|: the nearest reachable pose, to about that relat
 
 def _lm_step(G, e, mu, lo, hi):
     """The bounded Levenberg step on |e + G s|^2 + mu |G|^2 |s|^2: damping the same for every
-    scaled input, so that inputs the task does not need (co-contraction) are left alone."""
+    scaled input, so that inputs the task does not need (co-contraction) are left alone. The
+    unbounded step where it is inside the bounds (then the bounded one), else ``box_qp``'s, which
+    costs about 20 times as much."""
     A = G.T @ G
-    return box_qp(A + mu * jnp.trace(A) * jnp.eye(A.shape[0]), G.T @ e, lo, hi)[0]
+    H, g = A + mu * jnp.trace(A) * jnp.eye(A.shape[0]), G.T @ e
+    s = solve_spd(H, -g)
+    inside = jnp.all(s >= lo) & jnp.all(s <= hi)
+    return lazily(~inside, lambda H, g, lo, hi: box_qp(H, g, lo, hi)[0], s, H, g, lo, hi)
 
 
 def _damping(mu, nu, actual, predicted):
@@ -63,11 +75,10 @@ def _reach_status(e, G, v, mu, it, prob: Problem, tol, max_steps, stalled=False)
 
 
 class Model(NamedTuple):
-    """Phase 1's last linearisation, at its answer: the first step's model of the next warm
-    update (``track``), which then needs no evaluation before its first step. NaN: none."""
+    """Phase 1's last linearisation, at its answer: the next warm update (``track``) takes its first
+    step from it, with no evaluation before, and chord steps with it. NaN: none."""
 
-    K: jax.Array  # d(shooting unknowns, unscaled) / dv, (n, k)
-    G: jax.Array  # de / dv with the unknowns eliminated, (m, k)
+    J: jax.Array  # d(scaled boundary residual r, task residual e) / d(scaled shooting unknowns x, inputs v)
     tip_position: jax.Array  # [m], of the forward solve at the answer
     tip_rotation: jax.Array
 
@@ -75,9 +86,24 @@ class Model(NamedTuple):
 def no_model(prob: Problem, plan: Plan) -> Model:
     """A Model of NaNs, shaped for the problem: a cold start."""
     n, k = 6 + len(getattr(prob.base, "driven", ())), len(plan.tendons) + len(plan.tubes)
-    return Model(
-        jnp.full((n, k), jnp.nan), jnp.full((prob.target.size, k), jnp.nan), jnp.full(3, jnp.nan), jnp.full((3, 3), jnp.nan)
-    )
+    m = prob.target.size
+    return Model(jnp.full((n + m, n + k), jnp.nan), jnp.full(3, jnp.nan), jnp.full((3, 3), jnp.nan))
+
+
+def refreshed(model: Model, J_res, J_p, J_R, prob: Problem) -> Model:
+    """The model with its columns in x exact at its tip: the closing forward solve's d r / dx there
+    and d e / dx through its tip Jacobians J_p, J_R (``RootInfo``), in that solve's scaling, which
+    is the next update's. Its columns in v stay those of phase 1's last linearisation; without a
+    closing solve (its Jacobians NaN), all of them."""
+    n = J_res.shape[0]
+    if n + prob.target.size != model.J.shape[0]:  # a root with unknowns phase 1 does not have
+        return model
+
+    def e(dx):
+        return task_residual(model.tip_position + J_p @ dx, model.tip_rotation + J_R @ dx, prob.target, prob.robot.length)
+
+    fresh = model._replace(J=model.J.at[:n, :n].set(J_res).at[n:, :n].set(jax.jacfwd(e)(jnp.zeros(n))))
+    return _where(jnp.all(jnp.isfinite(J_res)), fresh, model)
 
 
 def _usable(model: Model):
@@ -91,6 +117,7 @@ class Reach(NamedTuple):
     steps: jax.Array
     code: jax.Array  # SUCCESS (reached), UNREACHABLE (stationary above tol), or a failure code
     model: Model | None = None  # reach_augmented's last linearisation (tip NaN)
+    chords: jax.Array = np.int32(0)  # how many of the steps were chord steps (``reach_augmented``)
 
 
 def _where(keep, new, old):
@@ -152,18 +179,31 @@ class Linearisation(NamedTuple):
     e: jax.Array
 
 
+def _reduced(F, J, n: int) -> Linearisation:
+    """x eliminated from the residuals F = (r, e) with their Jacobian J in z = (x, v) (n unknowns
+    x): Newton's dx = dx0 + K dv takes r to 0, leaving e + Ex dx0 + G dv."""
+    r, e = F[:n], F[n:]
+    Jx, Jv, Ex, Ev = J[:n, :n], J[:n, n:], J[n:, :n], J[n:, n:]
+    M = jnp.linalg.solve(Jx, jnp.concatenate([r[:, None], Jv], axis=1))
+    dx0, K = -M[:, 0], -M[:, 1:]
+    return Linearisation(dx0, K, Ev + Ex @ K, e + Ex @ dx0)
+
+
 class AugmentedState(NamedTuple):
     """``reach_augmented``'s loop state."""
 
     z: jax.Array  # the last accepted (scaled shooting unknowns, inputs)
     F: jax.Array  # the boundary and task residuals there
-    lin: Linearisation  # and the linearisation there
+    J: jax.Array  # their Jacobian: there, or an earlier one while chord steps
+    lin: Linearisation  # and the linearisation there (``_reduced``)
     s: jax.Array  # the step in v to try next
     mu: jax.Array
     nu: jax.Array
     it: jax.Array
     code: jax.Array
     first: jax.Array  # this pass's trial is z itself, taken as is (the start, or after a warm miss)
+    chord: jax.Array  # this pass evaluates F alone and keeps J (a warm update until a step misses)
+    chords: jax.Array  # chord passes so far
     done: jax.Array
 
 
@@ -172,9 +212,14 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, model: Model | None 
     tip boundary residual r(x, v) = 0 with Gauss-Newton on e for v, from one forward-mode
     Jacobian pass of (r, e) in (x, v); x is eliminated, so the bounded step is taken in v alone.
     ``wrench0`` must be the converged base wrench at v0. The loop's first pass linearises at the
-    start, so the Jacobian pass is compiled once; with a usable ``model`` (the last update's, at
-    v0) it takes a step from that model instead, the first-order predictor of the answer, with
-    the damping MU_WARM."""
+    start, so the Jacobian pass is compiled once.
+
+    With a usable ``model`` (the last update's, at v0) a warm update: its first step from that
+    model (the first-order predictor of the answer, damping MU_WARM), then chord steps, each one
+    evaluation of (r, e) without a Jacobian pass (a quarter of its cost), with the model's
+    Jacobian and Broyden's rank-one update of it after each, for as long as each shrinks |(r, e)|
+    by CHORD; a step that does not ends the chord steps, and the update linearises where it
+    stands. With ``model`` None (static) no chord code is compiled."""
     robot, L = prob.robot, prob.robot.length
     tol, max_steps = prob.options.tol, prob.options.max_steps
     F_s = force_scale(robot, actuation_of(v0, prob, plan), prob.load, prob.gravity)
@@ -186,14 +231,15 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, model: Model | None 
         F = jnp.concatenate([r, task_residual(tip.p, tip.R, prob.target, L)])
         return F, F
 
-    def linearise(z):
-        """Residuals, and x eliminated by Newton: dx = dx0 + K dv; the reduced G and e there."""
-        Jz, F = jax.jacfwd(residuals, has_aux=True)(z)
-        r, e = F[:n], F[n:]
-        Jx, Jv, Ex, Ev = Jz[:n, :n], Jz[:n, n:], Jz[n:, :n], Jz[n:, n:]
-        M = jnp.linalg.solve(Jx, jnp.concatenate([r[:, None], Jv], axis=1))
-        dx0, K = -M[:, 0], -M[:, 1:]
-        return F, Linearisation(dx0, K, Ev + Ex @ K, e + Ex @ dx0)
+    def linearise(z, J):
+        J, F = jax.jacfwd(residuals, has_aux=True)(z)
+        return F, J
+
+    def evaluate(z, chord, J):
+        """(F, J) at z: a Jacobian pass, or with ``chord`` F alone and J kept."""
+        if model is None:
+            return linearise(z, J)
+        return lax.cond(chord, lambda z, J: (residuals(z)[0], J), linearise, z, J)
 
     def merit(F):
         return jnp.where(jnp.all(jnp.isfinite(F)), F @ F, jnp.inf)
@@ -202,46 +248,54 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, model: Model | None 
         return ~c.done
 
     def body(c):
-        z, F, lin, s, mu, nu, it, first = c.z, c.F, c.lin, c.s, c.mu, c.nu, c.it, c.first
+        z, F, lin, s, mu, nu, it, first, chord = c.z, c.F, c.lin, c.s, c.mu, c.nu, c.it, c.first, c.chord
         dx0, K, G, e = lin
-        trial = z + jnp.concatenate([dx0 + K @ s, s])
-        F_t, lin_t = linearise(trial)
+        trial = jnp.where(first, z, z + jnp.concatenate([dx0 + K @ s, s]))
+        F_t, J_t = evaluate(trial, chord, c.J)
+        dz = trial - z
+        J_t = jnp.where(chord, J_t + jnp.outer(F_t - F - J_t @ dz, dz) / jnp.maximum(dz @ dz, 1e-300), J_t)
+        lin_t = _reduced(F_t, J_t, n)
         linear = e + G @ s  # the model: Newton takes r to 0, Gauss-Newton e to this
         damped = _damping(mu, nu, merit(F) - merit(F_t), merit(F) - linear @ linear)
-        mu, nu = jnp.where(first, mu, damped[0]), jnp.where(first, nu, damped[1])
+        mu, nu = jnp.where(first | chord, mu, damped[0]), jnp.where(first | chord, nu, damped[1])
         # while the boundary residual is off, e is not yet the task error: a step that halves r is
         # taken even where it moves e the wrong way
         restores = (jnp.max(jnp.abs(F[:n])) > prob.solver.tol) & (jnp.linalg.norm(F_t[:n]) <= 0.5 * jnp.linalg.norm(F[:n]))
-        better = first | damped[2] | restores
-        stalled = ~first & damped[2] & (merit(F) - merit(F_t) <= STALLED * merit(F))
-        z, F, lin = _where(better, (trial, F_t, lin_t), (z, F, lin))
+        better = jnp.where(chord, merit(F_t) <= CHORD**2 * merit(F), first | damped[2] | restores)
+        stalled = ~first & ~chord & damped[2] & (merit(F) - merit(F_t) <= STALLED * merit(F))
+        z, F, J, lin = _where(better, (trial, F_t, J_t, lin_t), (z, F, c.J, lin))
         code, done = _reach_status(F[n:], lin.G, z[n:], mu, it, prob, tol, max_steps, stalled)
         # reached only with the boundary residual converged too; stationary (UNREACHABLE) once it is
         # near enough for the closing forward solve to converge from here
         r = jnp.max(jnp.abs(F[:n]))
-        code = jnp.where((code == status.SUCCESS) & (r > prob.solver.tol), jnp.int32(status.OUTER_LIMIT), code)
+        # in the scaling of a forward solve at v, which takes this root as its own (``find``)
+        r_v = r * F_s / force_scale(robot, actuation_of(z[n:], prob, plan), prob.load, prob.gravity)
+        code = jnp.where((code == status.SUCCESS) & (r_v > prob.solver.tol), jnp.int32(status.OUTER_LIMIT), code)
         code = jnp.where((code == status.UNREACHABLE) & (r > jnp.sqrt(prob.solver.tol)), jnp.int32(status.OUTER_LIMIT), code)
         done = done & ((code != status.OUTER_LIMIT) | (it >= max_steps) | (mu >= MU_GIVE_UP))
-        # a warm update whose first step the old model got wrong linearises at the start next
-        fresh = warm & (it == 0) & ~better
-        s = jnp.where(fresh, 0.0, _lm_step(lin.G, lin.e, mu, prob.lo - z[n:], prob.hi - z[n:]))
-        return AugmentedState(z, F, lin, s, mu, nu, it + 1, code, fresh, done & ~fresh)
+        # chord steps judge no stationarity (their G is old): they end at the target, or miss and
+        # the update linearises where it stands next
+        done = jnp.where(chord, (code == status.SUCCESS) | (it >= max_steps), done)
+        fresh = chord & ~better
+        s = _lm_step(lin.G, lin.e, mu, prob.lo - z[n:], prob.hi - z[n:])
+        return AugmentedState(z, F, J, lin, s, mu, nu, it + 1, code, fresh, chord & better, c.chords + chord, done & ~fresh)
 
     z0 = jnp.concatenate([scaled(robot, wrench0, F_s), v0])
     m, k = prob.target.size, v0.shape[0]
-    F0, lin0 = jnp.zeros(n + m), Linearisation(jnp.zeros(n), jnp.zeros((n, k)), jnp.zeros((m, k)), jnp.zeros(m))  # unset
+    F0, J0 = jnp.zeros(n + m), jnp.zeros((n + m, n + k))  # unset
+    lin0 = Linearisation(jnp.zeros(n), jnp.zeros((n, k)), jnp.zeros((m, k)), jnp.zeros(m))
     s0, mu0, warm = jnp.zeros_like(v0), jnp.asarray(MU_START), jnp.asarray(False)
     if model is not None:
         # the boundary residual is converged at v0; e there from the tip, for the new target
         warm = _usable(model)
-        e0 = task_residual(model.tip_position, model.tip_rotation, prob.target, L)
-        K0 = jax.vmap(lambda k: scaled(robot, k, F_s), 1, 1)(model.K)
-        F0, lin0 = _where(warm, (jnp.concatenate([jnp.zeros(n), e0]), Linearisation(jnp.zeros(n), K0, model.G, e0)), (F0, lin0))
+        F_w = jnp.concatenate([jnp.zeros(n), task_residual(model.tip_position, model.tip_rotation, prob.target, L)])
+        lin_w = _reduced(F_w, model.J, n)
+        F0, J0, lin0 = _where(warm, (F_w, model.J, lin_w), (F0, J0, lin0))
         mu0 = jnp.where(warm, MU_WARM, MU_START)
-        s0 = jnp.where(warm, _lm_step(model.G, e0, MU_WARM, prob.lo - v0, prob.hi - v0), s0)
-    init = AugmentedState(z0, F0, lin0, s0, mu0, jnp.asarray(2.0), 0, jnp.int32(status.OUTER_LIMIT), ~warm, False)
-    c = lax.while_loop(cond, body, init)
-    last = Model(
-        jax.vmap(lambda k: unscaled(robot, k, F_s), 1, 1)(c.lin.K), c.lin.G, jnp.full(3, jnp.nan), jnp.full((3, 3), jnp.nan)
+        s0 = jnp.where(warm, _lm_step(lin_w.G, lin_w.e, MU_WARM, prob.lo - v0, prob.hi - v0), s0)
+    init = AugmentedState(
+        z0, F0, J0, lin0, s0, mu0, jnp.asarray(2.0), 0, jnp.int32(status.OUTER_LIMIT), ~warm, warm, jnp.int32(0), False
     )
-    return Reach(c.z[n:], unscaled(robot, c.z[:n], F_s), c.F[n:], c.it - 1 + warm, c.code, last)
+    c = lax.while_loop(cond, body, init)
+    last = Model(c.J, jnp.full(3, jnp.nan), jnp.full((3, 3), jnp.nan))
+    return Reach(c.z[n:], unscaled(robot, c.z[:n], F_s), c.F[n:], c.it - 1 + warm, c.code, last, c.chords)
