@@ -30,7 +30,8 @@ MU_GIVE_UP = 1e10
 
 CHORD = 0.5
 """A warm update's chord step (``reach_augmented``) is kept when it shrinks |(r, e)| at least this
-much; one that does not ends the chord steps."""
+much; the first that does not is tried again with its secant in J, the second ends the chord
+steps."""
 
 STALLED = 1e-10
 """An accepted phase-1 step that lowers |e|^2 by less than this, relatively, ends phase 1."""
@@ -204,6 +205,7 @@ class AugmentedState(NamedTuple):
     first: jax.Array  # this pass's trial is z itself, taken as is (the start, or after a warm miss)
     chord: jax.Array  # this pass evaluates F alone and keeps J (a warm update until a step misses)
     chords: jax.Array  # chord passes so far
+    misses: jax.Array  # chord steps that missed
     done: jax.Array
 
 
@@ -218,8 +220,10 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, model: Model | None 
     model (the first-order predictor of the answer, damping MU_WARM), then chord steps, each one
     evaluation of (r, e) without a Jacobian pass (a quarter of its cost), with the model's
     Jacobian and Broyden's rank-one update of it after each, for as long as each shrinks |(r, e)|
-    by CHORD; a step that does not ends the chord steps, and the update linearises where it
-    stands. With ``model`` None (static) no chord code is compiled."""
+    by CHORD; the first that does not is tried again from where it started (its secant now in J:
+    in the weak directions of a nearly singular task, where the old Jacobian is least right), the
+    second ends the chord steps, and the update linearises where it stands. With ``model`` None
+    (static) no chord code is compiled."""
     robot, L = prob.robot, prob.robot.length
     tol, max_steps = prob.options.tol, prob.options.max_steps
     F_s = force_scale(robot, actuation_of(v0, prob, plan), prob.load, prob.gravity)
@@ -263,7 +267,10 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, model: Model | None 
         restores = (jnp.max(jnp.abs(F[:n])) > prob.solver.tol) & (jnp.linalg.norm(F_t[:n]) <= 0.5 * jnp.linalg.norm(F[:n]))
         better = jnp.where(chord, merit(F_t) <= CHORD**2 * merit(F), first | damped[2] | restores)
         stalled = ~first & ~chord & damped[2] & (merit(F) - merit(F_t) <= STALLED * merit(F))
-        z, F, J, lin = _where(better, (trial, F_t, J_t, lin_t), (z, F, c.J, lin))
+        # a chord step that misses still updates J (Broyden's secant), and the next tries again from z
+        retry = chord & ~better & (c.misses == 0)
+        J_miss = jnp.where(retry, J_t, c.J)
+        z, F, J, lin = _where(better, (trial, F_t, J_t, lin_t), (z, F, J_miss, _where(retry, _reduced(F, J_miss, n), lin)))
         code, done = _reach_status(F[n:], lin.G, z[n:], mu, it, prob, tol, max_steps, stalled)
         # reached only with the boundary residual converged too; stationary (UNREACHABLE) once it is
         # near enough for the closing forward solve to converge from here
@@ -273,12 +280,27 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, model: Model | None 
         code = jnp.where((code == status.SUCCESS) & (r_v > prob.solver.tol), jnp.int32(status.OUTER_LIMIT), code)
         code = jnp.where((code == status.UNREACHABLE) & (r > jnp.sqrt(prob.solver.tol)), jnp.int32(status.OUTER_LIMIT), code)
         done = done & ((code != status.OUTER_LIMIT) | (it >= max_steps) | (mu >= MU_GIVE_UP))
-        # chord steps judge no stationarity (their G is old): they end at the target, or miss and
-        # the update linearises where it stands next
+        # chord steps judge no stationarity (their G is old): they end at the target, or miss twice
+        # and the update linearises where it stands next
         done = jnp.where(chord, (code == status.SUCCESS) | (it >= max_steps), done)
-        fresh = chord & ~better
+        fresh = chord & ~better & ~retry
         s = _lm_step(lin.G, lin.e, mu, prob.lo - z[n:], prob.hi - z[n:])
-        return AugmentedState(z, F, J, lin, s, mu, nu, it + 1, code, fresh, chord & better, c.chords + chord, done & ~fresh)
+        return AugmentedState(
+            z,
+            F,
+            J,
+            lin,
+            s,
+            mu,
+            nu,
+            it + 1,
+            code,
+            fresh,
+            chord & (better | retry),
+            c.chords + chord,
+            c.misses + (chord & ~better),
+            done & ~fresh,
+        )
 
     z0 = jnp.concatenate([scaled(robot, wrench0, F_s), v0])
     m, k = prob.target.size, v0.shape[0]
@@ -294,7 +316,20 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, model: Model | None 
         mu0 = jnp.where(warm, MU_WARM, MU_START)
         s0 = jnp.where(warm, _lm_step(lin_w.G, lin_w.e, MU_WARM, prob.lo - v0, prob.hi - v0), s0)
     init = AugmentedState(
-        z0, F0, J0, lin0, s0, mu0, jnp.asarray(2.0), 0, jnp.int32(status.OUTER_LIMIT), ~warm, warm, jnp.int32(0), False
+        z0,
+        F0,
+        J0,
+        lin0,
+        s0,
+        mu0,
+        jnp.asarray(2.0),
+        0,
+        jnp.int32(status.OUTER_LIMIT),
+        ~warm,
+        warm,
+        jnp.int32(0),
+        jnp.int32(0),
+        False,
     )
     c = lax.while_loop(cond, body, init)
     last = Model(c.J, jnp.full(3, jnp.nan), jnp.full((3, 3), jnp.nan))
