@@ -60,11 +60,11 @@ class Tried(NamedTuple):
 def find(prob: Problem, v0, wrench0, n_starts, model: Model | None, plan: Plan) -> Found:
     """The IK solution in scaled inputs (see the module docstring), from v0 (and the converged or
     NaN base wrench there; with a usable ``model`` at v0, a warm update from it; None: no warm
-    update compiled), then from the
-    grid start (``nearest_on_grid``) and ``starts`` until one reaches (the nearest pose of them
-    all otherwise), then phase 2 a step a pass, then the forward solve at the answer: one loop
-    whose passes share one forward solve in the compiled program. Its derivatives by implicit
-    differentiation (``_find_jvp``)."""
+    update compiled), then from the grid start (``nearest_on_grid``) and ``starts`` until one
+    reaches (the nearest pose of them all otherwise), then phase 2 a step a pass, then the
+    forward solve at the answer unless phase 1 reached at a converged one: one loop whose passes
+    share one forward solve in the compiled program. Its derivatives by implicit differentiation
+    (``_find_jvp``)."""
     candidates = starts(v0, prob, plan)
     cold = no_model(prob, plan)
     warm = False if model is None else _usable(model)
