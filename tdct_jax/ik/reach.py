@@ -256,8 +256,9 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, model: Model | None 
         dx0, K, G, e = lin
         trial = jnp.where(first, z, z + jnp.concatenate([dx0 + K @ s, s]))
         F_t, J_t = evaluate(trial, chord, c.J)
-        dz = trial - z
-        J_t = jnp.where(chord, J_t + jnp.outer(F_t - F - J_t @ dz, dz) / jnp.maximum(dz @ dz, 1e-300), J_t)
+        if model is not None:  # a chord step updates the J it kept by its secant (Broyden)
+            dz = trial - z
+            J_t = jnp.where(chord, J_t + jnp.outer(F_t - F - J_t @ dz, dz) / jnp.maximum(dz @ dz, 1e-300), J_t)
         lin_t = _reduced(F_t, J_t, n)
         linear = e + G @ s  # the model: Newton takes r to 0, Gauss-Newton e to this
         damped = _damping(mu, nu, merit(F) - merit(F_t), merit(F) - linear @ linear)
@@ -267,10 +268,11 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, model: Model | None 
         restores = (jnp.max(jnp.abs(F[:n])) > prob.solver.tol) & (jnp.linalg.norm(F_t[:n]) <= 0.5 * jnp.linalg.norm(F[:n]))
         better = jnp.where(chord, merit(F_t) <= CHORD**2 * merit(F), first | damped[2] | restores)
         stalled = ~first & ~chord & damped[2] & (merit(F) - merit(F_t) <= STALLED * merit(F))
-        # a chord step that misses still updates J (Broyden's secant), and the next tries again from z
         retry = chord & ~better & (c.misses == 0)
-        J_miss = jnp.where(retry, J_t, c.J)
-        z, F, J, lin = _where(better, (trial, F_t, J_t, lin_t), (z, F, J_miss, _where(retry, _reduced(F, J_miss, n), lin)))
+        kept = (z, F, c.J, lin)
+        if model is not None:  # a chord step that misses still updates J, and the next tries again from z
+            kept = _where(retry, (z, F, J_t, _reduced(F, J_t, n)), kept)
+        z, F, J, lin = _where(better, (trial, F_t, J_t, lin_t), kept)
         code, done = _reach_status(F[n:], lin.G, z[n:], mu, it, prob, tol, max_steps, stalled)
         # reached only with the boundary residual converged too; stationary (UNREACHABLE) once it is
         # near enough for the closing forward solve to converge from here
