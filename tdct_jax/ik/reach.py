@@ -24,6 +24,10 @@ MU_WARM = 1e-10
 """Initial damping of a warm update (``reach_augmented`` with the last update's model): its model
 is good, so Gauss-Newton's minimum-norm step; at MU_START the directions G barely moves (the
 insertion) would converge linearly, a few steps per update."""
+MU_FALL = 1 / 30
+"""The most an accepted step lowers the damping by (a factor). Cold IK starts far from its answer
+and damped; at Nielsen's 1/3 it took 8 steps to the benchmark's target and 7.8 on average over
+128 random reachable ones, at 1/30 6 and 6.5, the answers within the same tolerance."""
 MU_GIVE_UP = 1e10
 """Damping at which a phase stops: no step it could take lowers its merit."""
 
@@ -54,10 +58,10 @@ def _lm_step(G, e, mu, lo, hi):
 
 def _damping(mu, nu, actual, predicted):
     """Nielsen's update of the damping from the gain ratio actual / predicted decrease: (mu, nu,
-    accepted)."""
+    accepted); an accepted step lowers mu by up to MU_FALL, not Nielsen's 1/3."""
     rho = actual / jnp.where(predicted > 0, predicted, jnp.inf)
     accepted = (actual > 0) & jnp.isfinite(actual)
-    mu_ok = mu * jnp.maximum(1 / 3, 1 - (2 * rho - 1) ** 3)
+    mu_ok = mu * jnp.maximum(MU_FALL, 1 - (2 * rho - 1) ** 3)
     return jnp.where(accepted, mu_ok, mu * nu), jnp.where(accepted, 2.0, 2 * nu), accepted
 
 
