@@ -2,8 +2,11 @@
 
 import jax
 
+from .compiler import use_fast_compile_flags
+
 __version__ = "0.1.0"
 
+use_fast_compile_flags()
 jax.config.update("jax_enable_x64", True)
 
 from . import status as status  # noqa: E402
