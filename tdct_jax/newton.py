@@ -62,13 +62,21 @@ def newton(F, x0, tol, max_iter):
         J_r = J[0]
         return x - jnp.linalg.solve(J_r.T @ J_r + mu * jnp.eye(x.size), J_r.T @ r)
 
-    return damped(linearize, step, x0, tol, max_iter)
+    return damped(linearize, step, x0, tol, max_iter, _jacobian_shapes(F, x0))
 
 
-def damped(linearize, step, x0, tol, max_iter):
+def _jacobian_shapes(F, x):
+    """The shapes of ``newton``'s (residual, J) from one primal trace of F (J of a flat x: each
+    output's shape followed by x's), rather than a trace of its Jacobian pass."""
+    out = jax.eval_shape(F, x)
+    return out[0], jax.tree.map(lambda o: jax.ShapeDtypeStruct(o.shape + x.shape, o.dtype), out)
+
+
+def damped(linearize, step, x0, tol, max_iter, shapes=None):
     """The Levenberg-Marquardt loop of ``newton`` for any linearisation: ``linearize(x)`` gives
     (residual, J), ``step(x, residual, J, mu)`` the next point to try with damping mu; x may be a
-    pytree (e.g. with rotations, updated on SO(3) by ``step``). Returns what ``newton`` returns."""
+    pytree (e.g. with rotations, updated on SO(3) by ``step``). ``shapes``: those of (residual, J)
+    when known, else from a trace of ``linearize``. Returns what ``newton`` returns."""
 
     def not_done(c):
         x, r, J, mu, it, x_try = c
@@ -82,7 +90,7 @@ def damped(linearize, step, x0, tol, max_iter):
         mu = jnp.where(ok, mu / 10, mu * 10)
         return x, r, J, mu, it + 1, step(x, r, J, mu)
 
-    r0, J0 = jax.tree.map(lambda o: jnp.zeros(o.shape, o.dtype), jax.eval_shape(linearize, x0))
+    r0, J0 = jax.tree.map(lambda o: jnp.zeros(o.shape, o.dtype), shapes or jax.eval_shape(linearize, x0))
     init = (x0, jnp.full(r0.size, jnp.inf), J0, jnp.asarray(MU_START), 0, x0)
     x, r, J, mu, it, _ = lax.while_loop(not_done, body, init)
     code = jnp.where(
@@ -138,9 +146,11 @@ def continuation(F_at, x0, x_ramp, tol, max_iter, stages=(1, 4, 16), solve=newto
     function of lam.
     """
     ramps = jnp.asarray(stages, jnp.int32)
-    _, r0, J0, _, _ = jax.tree.map(
-        lambda o: jnp.zeros(o.shape, o.dtype), jax.eval_shape(lambda: solve(F_at(1.0), x0, tol, max_iter))
-    )
+    if solve is newton:
+        shapes = _jacobian_shapes(lambda x: F_at(1.0)(x), x0)  # F_at's own work traced inside too
+    else:
+        shapes = jax.eval_shape(lambda: solve(F_at(1.0), x0, tol, max_iter))[1:3]
+    r0, J0 = jax.tree.map(lambda o: jnp.zeros(o.shape, o.dtype), shapes)
     ramp_at = x_ramp if callable(x_ramp) else (lambda lam: lam * x_ramp)
 
     def not_done(c):
