@@ -7,7 +7,7 @@ import os
 FAST_COMPILE = "--xla_cpu_use_fusion_emitters=false"
 """XLA:CPU's older fusion code generator: on the 2-core machine a cold forward solve compiles in
 3.7 s instead of 4.4 s and an IK plan in 8.2 s instead of 10.4 s, the compiled programs as fast
-(docs/performance.md, "Compiles"). XLA aborts the process on a flag it does not know, so it is set
+(docs/performance.md, "Compiling"). XLA aborts the process on a flag it does not know, so it is set
 only for the jaxlib versions it was measured on."""
 
 TESTED_JAXLIB = ("0.10.",)
