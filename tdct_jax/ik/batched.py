@@ -48,7 +48,9 @@ def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
     base = (prob._replace(target=None, load=None if loads else prob.load), wrench0, leaves)
     chunk = CHUNK_SIZE if jax.default_backend() == "cpu" else default_chunk_size()
     out = run_batched(kernel, base, points | {"starts": np.ones(len(v0), np.int32)}, chunk_size=chunk, progress=False)
-    again = np.flatnonzero(out[".result"] != status.SUCCESS)
+    # every start gives a target that phase 1 reached from its first the same answer (the next is
+    # tried only after one falls short): one whose phase 2 ran out of steps is not run again
+    again = np.flatnonzero((out[".result"] != status.SUCCESS) & ~out["reached"])
     if again.size:  # padded to whole calls of ``lanes``, the first pass's where it has no more than RETRY_LANES
         lanes = min(lanes_per_call(len(v0), chunk), RETRY_LANES)
         rows = np.concatenate([again, np.full(-again.size % lanes, again[-1])])
@@ -77,11 +79,11 @@ def _ik_point(base, point, kernel: Kernel) -> dict:
     own = kernel.option("own")
     leaves = [point[f"in{i}"] if i in own else leaf for i, leaf in enumerate(leaves)]
     prob = _one(prob, jax.tree.unflatten(kernel.option("tree"), leaves))
-    result = _solve_ik(prob, point["v0"], wrench0, kernel.option("plan"), n_starts=point["starts"])[0]
+    result, _, _, reached = _solve_ik(prob, point["v0"], wrench0, kernel.option("plan"), n_starts=point["starts"])
     paths, tree = jax.tree_util.tree_flatten_with_path(result)
     names = [jax.tree_util.keystr(path) for path, _ in paths]
     RESULT_TREES[kernel, jax.tree.structure(base)] = names, tree
-    return {name: leaf for name, (_, leaf) in zip(names, paths, strict=True)}
+    return {name: leaf for name, (_, leaf) in zip(names, paths, strict=True)} | {"reached": reached}
 
 
 @functools.partial(jax.jit, static_argnames=("plan", "tree", "own"))
@@ -89,7 +91,7 @@ def _track(prob, leaves, v0, wrench0, plan, tree, own):
     def step(carry, xs):
         v, wrench, model = carry
         target = jax.tree.unflatten(tree, [xs[own.index(i)] if i in own else leaf for i, leaf in enumerate(leaves)])
-        result, *new = _solve_ik(prob._replace(target=target), v, wrench, plan, model=model)
+        result, *new, _ = _solve_ik(prob._replace(target=target), v, wrench, plan, model=model)
         ok = result.result == status.SUCCESS
         return _where(ok, (scaled_inputs(result.actuation, prob, plan), *new), (v, wrench, model)), result
 

@@ -34,6 +34,8 @@ class Found(NamedTuple):
     x: jax.Array  # the forward solve at v, scaled unknowns: the closing one, or phase 1's where it
     # reached (unset with multiple shooting)
     info: RootInfo  # and its RootInfo (phase 1's: no Jacobians, NaN)
+    reached: jax.Array  # phase 1 reached the target (phase 2 ran where there is an objective): more
+    # starts would give the same answer, since each is tried only after the one before fell short
 
 
 REACH, OPTIMISE, CLOSE, DONE = range(4)
@@ -148,7 +150,8 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model | None, plan: Plan) 
         nan = jnp.full((n, n), jnp.nan), (jnp.full((3, n), jnp.nan), jnp.full((3, 3, n), jnp.nan))
         reached = (scaled(prob.robot, r.wrench, F_c), RootInfo(0, 1, jnp.int32(status.SUCCESS), nan))
         x, info = _where(r.code == status.SUCCESS, reached, (x, info))
-    return Found(r.v, r.wrench, tried.steps, r.code, r.model, r.chords, x, info)
+    reached = r.code == status.SUCCESS if sqp is None else tried.sqp.it > 0
+    return Found(r.v, r.wrench, tried.steps, r.code, r.model, r.chords, x, info, reached)
 
 
 @find.defjvp
@@ -190,7 +193,7 @@ def _find_jvp(plan, primals, tangents):
         rhs = jnp.concatenate([-(dL + W @ dv_bound) * F, -rhs_e])
         dv = jnp.linalg.solve(K, rhs)[:n]
     dv = jnp.where(free, dv, dv_bound)
-    zero = jax.tree.map(_zero_like, (wrench, found.steps, found.code, found.model, found.chords, found.x, found.info))
+    zero = jax.tree.map(_zero_like, (wrench, found.steps, found.code, found.model, found.chords, found.x, found.info, found.reached))
     return found, Found(dv, *zero)
 
 
@@ -202,7 +205,8 @@ def _zero_like(x):
 @functools.partial(jax.jit, static_argnames=("plan",))
 def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, n_starts=STARTS, model=None):
     """``find`` (warm from ``model``, a Model at v0, when given), then the forward solve there and
-    the result's numbers; (IKResult, wrench, the Model for the next warm update)."""
+    the result's numbers; (IKResult, wrench, the Model for the next warm update, whether phase 1
+    reached the target: ``Found.reached``)."""
     found = find(prob, v0, wrench0, n_starts, model, plan)
     act = actuation_of(found.v, prob, plan)
     problem = (prob.robot, act, prob.load, prob.gravity)
@@ -221,4 +225,4 @@ def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, n_starts=STARTS, model=
     model = found.model._replace(tip_position=sol.tip_position, tip_rotation=sol.tip_rotation)
     if prob.solver.intervals == 1:
         model = refreshed(model, J_res, J_p, J_R, prob)
-    return result, _wrench(sol, act), model
+    return result, _wrench(sol, act), model, found.reached
