@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import tdct_jax as tdct
-from tdct_jax.cli import main
 from tdct_jax.batch import run_batched
+from tdct_jax.cli import main
 from tdct_jax.description import ROBOTS
 from tdct_jax.ik import batched
 

@@ -193,8 +193,7 @@ def _find_jvp(plan, primals, tangents):
         rhs = jnp.concatenate([-(dL + W @ dv_bound) * F, -rhs_e])
         dv = jnp.linalg.solve(K, rhs)[:n]
     dv = jnp.where(free, dv, dv_bound)
-    zero = jax.tree.map(_zero_like, (wrench, found.steps, found.code, found.model, found.chords, found.x, found.info, found.reached))
-    return found, Found(dv, *zero)
+    return found, Found(dv, *jax.tree.map(_zero_like, tuple(found[1:])))
 
 
 def _zero_like(x):
