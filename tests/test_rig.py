@@ -195,12 +195,14 @@ def test_cli_calibrates_a_slice_end_to_end(tmp_path, capsys):
             ",".join(PARAMS),
             "--out",
             str(out),
+            "--max-steps",
+            "3",
             "--json",
             "--quiet",
         ]
     )
     report = json.loads(capsys.readouterr().out)
-    assert code in (0, 1)  # 1: the fit on 24 samples may stop at max_steps; its best values are kept
+    assert code in (0, 1)  # 1: stopped at --max-steps, its best values kept (the fit's accuracy: the test above)
     fit = report["fit"]
     assert fit["after_mm"]["rmse"] < fit["before_mm"]["rmse"]
     fitted = rigs.Rig.from_toml(out / "fitted.toml")
