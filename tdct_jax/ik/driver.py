@@ -150,8 +150,8 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model | None, plan: Plan) 
         nan = jnp.full((n, n), jnp.nan), (jnp.full((3, n), jnp.nan), jnp.full((3, 3, n), jnp.nan))
         reached = (scaled(prob.robot, r.wrench, F_c), RootInfo(0, 1, jnp.int32(status.SUCCESS), nan))
         x, info = _where(r.code == status.SUCCESS, reached, (x, info))
-    reached = r.code == status.SUCCESS if sqp is None else tried.sqp.it > 0
-    return Found(r.v, r.wrench, tried.steps, r.code, r.model, r.chords, x, info, reached)
+    phase_1_reached = r.code == status.SUCCESS if sqp is None else tried.sqp.it > 0
+    return Found(r.v, r.wrench, tried.steps, r.code, r.model, r.chords, x, info, phase_1_reached)
 
 
 @find.defjvp
