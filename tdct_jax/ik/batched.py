@@ -20,15 +20,16 @@ from .starts import STARTS
 
 CHUNK_SIZE = 64
 """Targets per compiled call of a batched IK on the CPU (other platforms: ``batch.CHUNK_SIZES``).
-A round trip over 1,000 targets took 81 s at 256 lanes against 55 s at 64 (tests/test_ik.py, compile included); with the grid start since, 51 s at 64 (quiet,
+Targets that miss from their first start run again from every start, padded to this many lanes so
+as to reuse the compiled program: a round trip over 1,000 targets took 81 s at 256 lanes against
+55 s at 64 (tests/test_ik.py, compile included); with the grid start since, 51 s at 64 (quiet,
 2026-11-26)."""
 RETRY_LANES = 1024
-"""Lanes per compiled call of the retry pass at most: its misses padded to a power of two (the
-first pass's chunk at most), as the sweep engine's retry does (``batch.RETRY_LANES``). A vmapped
-pass costs what its lanes cost, not its misses: on one H100, 30 misses padded to the first pass's
-8,192 lanes took 37 s, 4 misses over 1,024 lanes 2.3 s; on the CPU, the 1,000-target round
-trip's 9-16 misses over 64 lanes 12.8-13.7 s warm, over 16 lanes 3.3 s (its compile about 8 s,
-once a lane count), the answers the same to 2e-13 (benchmarks/README.md)."""
+"""Lanes per compiled call of the retry pass at most: it reuses the first pass's program where
+that has no more lanes (the CPU's 64), and otherwise compiles one of this size. A vmapped retry
+costs what its lanes cost, not its misses: on one H100, 30 misses padded to the first pass's
+8,192 lanes took 37 s, 4 misses over 1,024 lanes 2.3 s; on the CPU with 256-lane chunks, one miss
+over 256 lanes 71 s, over 32 lanes 10 s (benchmarks/README.md)."""
 
 
 def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
@@ -50,8 +51,8 @@ def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
     # every start gives a target that phase 1 reached from its first the same answer (the next is
     # tried only after one falls short): one whose phase 2 ran out of steps is not run again
     again = np.flatnonzero((out[".result"] != status.SUCCESS) & ~out["reached"])
-    if again.size:  # padded to whole calls of ``lanes``
-        lanes = min(lanes_per_call(again.size, chunk), RETRY_LANES)
+    if again.size:  # padded to whole calls of ``lanes``, the first pass's where it has no more than RETRY_LANES
+        lanes = min(lanes_per_call(len(v0), chunk), RETRY_LANES)
         rows = np.concatenate([again, np.full(-again.size % lanes, again[-1])])
         retry = {k: v[rows] for k, v in points.items()} | {"starts": np.full(rows.size, STARTS, np.int32)}
         for k, v in run_batched(kernel, base, retry, chunk_size=lanes, progress=False).items():
