@@ -30,9 +30,14 @@ def round_trip(two_segment):
     rng = np.random.default_rng(23)  # benchmarks/ik_general.py's draw: these are its first ROUND_TRIP
     tensions = rng.uniform(0, 3, (1000, 6))[:ROUND_TRIP] * (rng.random((1000, 6)) < 0.5)[:ROUND_TRIP]
     tips = np.stack([np.asarray(tdct.solve(two_segment, tdct.GeneralActuation(t, [])).tip_position) for t in tensions])
-    passes = []
-    with pytest.MonkeyPatch.context() as m:  # the batch engine's passes: the first, and a retry of the misses
-        m.setattr(batched, "run_batched", lambda *a, **k: passes.append(len(a[2]["v0"])) or run_batched(*a, **k))
+    passes = []  # targets in each of the batch engine's passes: the first, and a retry of the misses
+
+    def counted(kernel, base, points, **options):
+        passes.append(len(points["v0"]))
+        return run_batched(kernel, base, points, **options)
+
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(batched, "run_batched", counted)
         result = tdct.inverse_kinematics(two_segment, tdct.Target(tips), objective="tension", throw=False)
     return tensions, tips, result, passes
 

@@ -48,8 +48,8 @@ def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
     base = (prob._replace(target=None, load=None if loads else prob.load), wrench0, leaves)
     chunk = CHUNK_SIZE if jax.default_backend() == "cpu" else default_chunk_size()
     out = run_batched(kernel, base, points | {"starts": np.ones(len(v0), np.int32)}, chunk_size=chunk, progress=False)
-    # every start gives a target that phase 1 reached from its first the same answer (the next is
-    # tried only after one falls short): one whose phase 2 ran out of steps is not run again
+    # a target that phase 1 reached from its first start gets the same answer from every start (the
+    # next is tried only after one falls short), e.g. one whose phase 2 ran out of steps: not run again
     again = np.flatnonzero((out[".result"] != status.SUCCESS) & ~out["reached"])
     if again.size:  # padded to whole calls of ``lanes``, the first pass's where it has no more than RETRY_LANES
         lanes = min(lanes_per_call(len(v0), chunk), RETRY_LANES)
