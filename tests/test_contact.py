@@ -137,17 +137,24 @@ def scene_of(point, normal, centre, radius):
     return tdct.Scene((tdct.Plane(point, normal, name="wall"), tdct.Sphere(centre, radius, name="ball")), every=2)
 
 
+def _solve_one(obstacle):
+    act = tdct.GeneralActuation([TENSION])
+    return tdct.solve(beam(True), act, tdct.Loads(jnp.asarray(TIP_FORCE)), gravity=ZERO_G, scene=scene_of(*obstacle), throw=False)
+
+
+# lax.map, not vmap: one configuration after another, each running only the solver branches it
+# needs (under vmap every lane runs the smoothed fallback once one lane does)
+_solve_chunk = jax.jit(lambda obs: jax.lax.map(_solve_one, obs))
+
+
 def solve_random(n, seed):
+    """n random scenes solved N_RANDOM at a time (the last chunk padded with its last scene), so
+    every n runs the one compiled program."""
     obstacles = random_obstacles(n, seed)
-    tip_force = jnp.asarray(TIP_FORCE)
-
-    def one(obstacle):
-        act = tdct.GeneralActuation([TENSION])
-        return tdct.solve(beam(True), act, tdct.Loads(tip_force), gravity=ZERO_G, scene=scene_of(*obstacle), throw=False)
-
-    # lax.map, not vmap: one configuration after another, each running only the solver branches it
-    # needs (under vmap every lane runs the smoothed fallback once one lane does)
-    return obstacles, tip_force, jax.jit(lambda obs: jax.lax.map(one, obs))(tuple(map(jnp.asarray, obstacles)))
+    padded = -(-n // N_RANDOM) * N_RANDOM
+    arrays = [np.concatenate([a, np.repeat(a[-1:], padded - n, axis=0)]) for a in obstacles]
+    chunks = [_solve_chunk(tuple(jnp.asarray(a[i : i + N_RANDOM]) for a in arrays)) for i in range(0, padded, N_RANDOM)]
+    return obstacles, jnp.asarray(TIP_FORCE), jax.tree.map(lambda *c: jnp.concatenate(c)[:n], *chunks)
 
 
 @pytest.fixture(scope="module", params=[pytest.param(N_RANDOM, id="64"), pytest.param(1000, id="1000", marks=pytest.mark.slow)])
