@@ -38,6 +38,22 @@ def test_round_trip_reaches_random_reachable_targets_within_bounds(round_trip):
     np.testing.assert_allclose(np.asarray(result.tip_position)[reached], forward.tip_position[reached], rtol=0, atol=REACH_M)
 
 
+def test_retried_targets_get_the_answer_of_one_ik_from_every_start(robot, round_trip):
+    """The batch tries a target's other starts side by side only where its first start fell short;
+    each then has what one IK trying its starts in turn finds: the targets with the most steps
+    (those retried) against single IKs."""
+    forward, result = round_trip
+    steps = np.asarray(result.iterations)
+    hardest = np.argsort(steps)[-3:]
+    assert steps[hardest].min() > np.median(steps)
+    for i in hardest:
+        load = tdct.TipLoad.from_mass(float(forward.inputs["tip_mass"][i]))
+        one = tdct.inverse_kinematics(robot, tdct.Target(forward.tip_position[i]), load=load, throw=False)
+        assert int(one.iterations) == steps[i] and int(one.result) == int(result.result[i])
+        np.testing.assert_allclose(one.actuation.tensions, result.actuation.tensions[i], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(one.actuation.insertion, result.actuation.insertion[i], rtol=0, atol=1e-12)
+
+
 @pytest.fixture(scope="module")
 def tendon_1_tips(robot):
     """Tips over a fine grid of tendon-1 tensions (0.1 N) and insertions (2 mm): the brute force."""

@@ -13,17 +13,17 @@ from jax import lax
 from .. import status
 from ..batch import Kernel, default_chunk_size, lanes_per_call, run_batched
 from ..checks import is_concrete
-from .driver import _solve_ik
+from .driver import _solve_ik, rank
 from .problem import IKResult, Plan, Problem, _tip_force, scaled_inputs
 from .reach import _where, no_model
 from .starts import STARTS
 
 CHUNK_SIZE = 64
 """Targets per compiled call of a batched IK on the CPU (other platforms: ``batch.CHUNK_SIZES``).
-Targets that miss from their first start run again from every start, padded to this many lanes so
-as to reuse the compiled program: a round trip over 1,000 targets took 81 s at 256 lanes against
-55 s at 64 (tests/test_ik.py, compile included); with the grid start since, 51 s at 64 (quiet,
-2026-11-26)."""
+Targets that miss from their first start try their other starts, a start a lane (``_retry``), in
+calls of this many lanes so as to reuse the compiled program: a round trip over 1,000 targets took
+81 s at 256 lanes against 55 s at 64 (tests/test_ik.py, compile included); with the grid start
+since, 51 s at 64 (quiet, 2026-11-26)."""
 RETRY_LANES = 1024
 """Lanes per compiled call of the retry pass at most: it reuses the first pass's program where
 that has no more lanes (the CPU's 64), and otherwise compiles one of this size. A vmapped retry
@@ -35,8 +35,9 @@ over 256 lanes 71 s, over 32 lanes 10 s (benchmarks/README.md)."""
 def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
     """Many targets (a leading axis on ``prob.target``, and on ``prob.load`` when it has one).
     With concrete values they run through the batch engine in chunks, each target from its first
-    start only; those that did not reach run again from every start, so that a few hard targets
-    do not hold up the rest. Traced (inside the caller's jit or vmap): one vmap, every start."""
+    start only; those that did not reach run again, each of their other starts in a lane of its
+    own of the same compiled program (``_retry``), so that a few hard targets do not hold up the
+    rest. Traced (inside the caller's jit or vmap): one vmap, every start."""
     loads = jnp.ndim(_tip_force(prob.load)) == 2
     per = (prob.target, prob.load if loads else None)
     if not all(is_concrete(x) for x in jax.tree.leaves((prob, v0))):
@@ -47,18 +48,65 @@ def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
     kernel = Kernel(_ik_point, (("plan", plan), ("tree", tree), ("own", own)))
     base = (prob._replace(target=None, load=None if loads else prob.load), wrench0, leaves)
     chunk = CHUNK_SIZE if jax.default_backend() == "cpu" else default_chunk_size()
-    out = run_batched(kernel, base, points | {"starts": np.ones(len(v0), np.int32)}, chunk_size=chunk, progress=False)
+    n = len(v0)
+    out = run_batched(kernel, base, points | _tries(np.zeros(n, np.int32)), chunk_size=chunk, progress=False)
     # a target that phase 1 reached from its first start gets the same answer from every start (the
     # next is tried only after one falls short), e.g. one whose phase 2 ran out of steps: not run again
     again = np.flatnonzero((out[".result"] != status.SUCCESS) & ~out["reached"])
-    if again.size:  # padded to whole calls of ``lanes``, the first pass's where it has no more than RETRY_LANES
-        lanes = min(lanes_per_call(len(v0), chunk), RETRY_LANES)
-        rows = np.concatenate([again, np.full(-again.size % lanes, again[-1])])
-        retry = {k: v[rows] for k, v in points.items()} | {"starts": np.full(rows.size, STARTS, np.int32)}
-        for k, v in run_batched(kernel, base, retry, chunk_size=lanes, progress=False).items():
-            out[k][again] = v[: again.size]
+    if again.size:  # in whole calls of ``lanes``, the first pass's where it has no more than RETRY_LANES
+
+        def run(rows, first):
+            pad = -rows.size % lanes
+            rows, first = (np.concatenate([a, np.full(pad, a[-1])]) for a in (rows, first))
+            got = run_batched(
+                kernel, base, {k: v[rows] for k, v in points.items()} | _tries(first), chunk_size=lanes, progress=False
+            )
+            return {k: v[: rows.size - pad] for k, v in got.items()}
+
+        lanes = min(lanes_per_call(n, chunk), RETRY_LANES)
+        _retry(out, again, run)
     names, tree = RESULT_TREES[kernel, jax.tree.structure(base)]
     return jax.tree.unflatten(tree, [jnp.asarray(out[name]) for name in names])
+
+
+def _tries(first):
+    """The kernel's start inputs: each lane tries the one start ``first``."""
+    return {"first": first, "stop": first + 1}
+
+
+RETRY_ROUNDS = ((1,), tuple(range(2, STARTS)))
+"""The retry's rounds of starts: the grid start, then the others for the targets it did not bring
+to the target. A vmapped call lasts as long as its slowest lane, and a start that ``find`` would
+not have tried (one after a start that reached) can run to its step limit: on the paper robot's
+1,000-target round trip (``tests/test_ik.py``) the grid start reached 8 of its 9 misses within 15
+steps, while starts after it took up to 60."""
+
+
+def _retry(out: dict, again, run) -> None:
+    """Targets ``again`` (rows of the first pass's outputs ``out``, from start 0) from their other
+    starts, one start a lane, in ``RETRY_ROUNDS``: ``run(rows, first)`` runs the kernel on those
+    rows from those starts. Each target then takes what ``find`` trying its starts in turn would
+    have ended with: the first start that reached, or else the best end by ``rank`` and |e| (the
+    earlier on a tie), with the steps of every start it tried (so the answers are those of one IK
+    from every start)."""
+    ends = {row: [{k: v[row] for k, v in out.items()}] for row in again}
+    for starts in RETRY_ROUNDS:
+        todo = [row for row in again if not any(end["reached"] for end in ends[row])]
+        if not todo:
+            break
+        rows = np.repeat(todo, len(starts))
+        tried = run(rows, np.tile(np.asarray(starts, np.int32), len(todo)))
+        for j, row in enumerate(rows):
+            ends[row].append({k: v[j] for k, v in tried.items()})
+    for row, tried in ends.items():
+        reached = [j for j, end in enumerate(tried) if end["reached"]]
+        if reached:
+            best, used = reached[0], tried[: reached[0] + 1]
+        else:
+            best, used = min(range(len(tried)), key=lambda j: (int(rank(tried[j]["code"])), float(tried[j]["e2"]), j)), tried
+        for k in out:
+            out[k][row] = tried[best][k]
+        out[".iterations"][row] = sum(int(end[".iterations"]) for end in used)
 
 
 RESULT_TREES: dict = {}
@@ -79,11 +127,11 @@ def _ik_point(base, point, kernel: Kernel) -> dict:
     own = kernel.option("own")
     leaves = [point[f"in{i}"] if i in own else leaf for i, leaf in enumerate(leaves)]
     prob = _one(prob, jax.tree.unflatten(kernel.option("tree"), leaves))
-    result, _, _, reached = _solve_ik(prob, point["v0"], wrench0, kernel.option("plan"), n_starts=point["starts"])
+    result, _, _, ended = _solve_ik(prob, point["v0"], wrench0, kernel.option("plan"), tries=(point["first"], point["stop"]))
     paths, tree = jax.tree_util.tree_flatten_with_path(result)
     names = [jax.tree_util.keystr(path) for path, _ in paths]
     RESULT_TREES[kernel, jax.tree.structure(base)] = names, tree
-    return {name: leaf for name, (_, leaf) in zip(names, paths, strict=True)} | {"reached": reached}
+    return {name: leaf for name, (_, leaf) in zip(names, paths, strict=True)} | ended._asdict()
 
 
 @functools.partial(jax.jit, static_argnames=("plan", "tree", "own"))

@@ -36,6 +36,23 @@ class Found(NamedTuple):
     info: RootInfo  # and its RootInfo (phase 1's: no Jacobians, NaN)
     reached: jax.Array  # phase 1 reached the target (phase 2 ran where there is an objective): more
     # starts would give the same answer, since each is tried only after the one before fell short
+    e: jax.Array  # phase 1's task residual at v (with ``code``, how the starts' ends are ranked)
+
+
+class Ended(NamedTuple):
+    """How phase 1 ended, for a batch that runs a target's starts side by side: whether it reached
+    (``Found.reached``), its code and |e|^2 there (``Found.code``, ``Found.e``), by which ``find``
+    ranks the ends of its starts (``rank``)."""
+
+    reached: jax.Array
+    code: jax.Array
+    e2: jax.Array
+
+
+def rank(code):
+    """How ``find`` orders the ends of its starts, best first: reached, unreachable (the nearest
+    pose), a failure; within a rank, the smaller |e|."""
+    return jnp.where(code == status.SUCCESS, 0, jnp.where(code == status.UNREACHABLE, 1, 2))
 
 
 REACH, OPTIMISE, CLOSE, DONE = range(4)
@@ -59,14 +76,16 @@ class Tried(NamedTuple):
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(5,))
-def find(prob: Problem, v0, wrench0, n_starts, model: Model | None, plan: Plan) -> Found:
+def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> Found:
     """The IK solution in scaled inputs (see the module docstring), from v0 (and the converged or
     NaN base wrench there; with a usable ``model`` at v0, a warm update from it; None: no warm
     update compiled), then from the grid start (``nearest_on_grid``) and ``starts`` until one
     reaches (the nearest pose of them all otherwise), then phase 2 a step a pass, then the
     forward solve at the answer unless phase 1 reached at a converged one: one loop whose passes
-    share one forward solve in the compiled program. Its derivatives by implicit differentiation
-    (``_find_jvp``)."""
+    share one forward solve in the compiled program. ``tries`` = (first, stop): the starts tried
+    are first, ..., stop - 1 in that order (0 is v0, 1 the grid start, then ``starts``' others).
+    Its derivatives by implicit differentiation (``_find_jvp``)."""
+    first_start, n_starts = tries
     candidates = starts(v0, prob, plan)
     cold = no_model(prob, plan)
     warm = False if model is None else _usable(model)
@@ -104,10 +123,7 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model | None, plan: Plan) 
         def reached(v, wrench):
             r = reach(v, wrench, k == 0)
             r = r._replace(code=jnp.where(code == status.SUCCESS, r.code, code))
-            rank, best_rank = (
-                jnp.where(x.code == status.SUCCESS, 0, jnp.where(x.code == status.UNREACHABLE, 1, 2)) for x in (r, best)
-            )
-            closer = (rank < best_rank) | ((rank == best_rank) & (r.e @ r.e < best.e @ best.e))
+            closer = (rank(r.code) < rank(best.code)) | ((rank(r.code) == rank(best.code)) & (r.e @ r.e < best.e @ best.e))
             return jax.tree.map(lambda a, b: jnp.where(closer, a, b), r, best), c.steps + r.steps
 
         best, steps = lazily(reaching, reached, (best, c.steps), v, wrench)
@@ -135,14 +151,14 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model | None, plan: Plan) 
 
     n = jnp.shape(wrench0)[0]
     none = Reach(v0, jnp.full(n, jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT), cold)
-    first = after_reach(0, none)
+    first = after_reach(first_start, none)
     sqp = None if plan.objective is None else sqp_start(v0, jnp.full(n, jnp.nan), prob)
-    init = Tried(jnp.where(closing | (first != CLOSE), first, DONE), 0, none, 0, jnp.zeros(n), unset_info(n), sqp, 0)
+    init = Tried(jnp.where(closing | (first != CLOSE), first, DONE), first_start, none, 0, jnp.zeros(n), unset_info(n), sqp, 0)
     # the loop runs a pass for every start, phase 2's steps and the closing solve, the last ones
     # no-ops once the phases are DONE: a bound that XLA finds without tracing the passes' data
     # through the body (which it does for a loop whose condition reads the body's results, at a
     # cost that grows with the body's size)
-    passes = n_starts + 1 + (0 if plan.objective is None else prob.options.max_steps + 1)
+    passes = n_starts - first_start + 1 + (0 if plan.objective is None else prob.options.max_steps + 1)
     tried = lax.while_loop(lambda c: c.i < passes, body, init)
     r, x, info = tried.best, tried.x, tried.info
     if closing and plan.objective is None:  # reached: its root, no closing solve (``at_root`` takes J)
@@ -151,7 +167,7 @@ def find(prob: Problem, v0, wrench0, n_starts, model: Model | None, plan: Plan) 
         reached = (scaled(prob.robot, r.wrench, F_c), RootInfo(0, 1, jnp.int32(status.SUCCESS), nan))
         x, info = _where(r.code == status.SUCCESS, reached, (x, info))
     phase_1_reached = r.code == status.SUCCESS if sqp is None else tried.sqp.it > 0
-    return Found(r.v, r.wrench, tried.steps, r.code, r.model, r.chords, x, info, phase_1_reached)
+    return Found(r.v, r.wrench, tried.steps, r.code, r.model, r.chords, x, info, phase_1_reached, r.e)
 
 
 @find.defjvp
@@ -159,9 +175,9 @@ def _find_jvp(plan, primals, tangents):
     """Implicit differentiation of the optimality conditions at the solution: inputs at a bound
     follow the bound; the others keep e = 0 (the minimum-norm change when the task does not fix
     them) or, with an objective, the KKT conditions grad phi + G^T lam = 0, e = 0."""
-    prob, v0, wrench0, n_starts, model = primals
+    prob, v0, wrench0, tries, model = primals
     dprob = tangents[0]
-    found = find(prob, v0, wrench0, n_starts, model, plan)
+    found = find(prob, v0, wrench0, tries, model, plan)
     v, wrench = found.v, found.wrench
 
     def at(prob, v):
@@ -202,11 +218,11 @@ def _zero_like(x):
 
 
 @functools.partial(jax.jit, static_argnames=("plan",))
-def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, n_starts=STARTS, model=None):
-    """``find`` (warm from ``model``, a Model at v0, when given), then the forward solve there and
-    the result's numbers; (IKResult, wrench, the Model for the next warm update, whether phase 1
-    reached the target: ``Found.reached``)."""
-    found = find(prob, v0, wrench0, n_starts, model, plan)
+def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, tries=(0, STARTS), model=None):
+    """``find`` (warm from ``model``, a Model at v0, when given; the starts ``tries``), then the
+    forward solve there and the result's numbers; (IKResult, wrench, the Model for the next warm
+    update, ``Ended``: how phase 1 ended)."""
+    found = find(prob, v0, wrench0, tries, model, plan)
     act = actuation_of(found.v, prob, plan)
     problem = (prob.robot, act, prob.load, prob.gravity)
     if prob.solver.intervals > 1:
@@ -224,4 +240,4 @@ def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, n_starts=STARTS, model=
     model = found.model._replace(tip_position=sol.tip_position, tip_rotation=sol.tip_rotation)
     if prob.solver.intervals == 1:
         model = refreshed(model, J_res, J_p, J_R, prob)
-    return result, _wrench(sol, act), model, found.reached
+    return result, _wrench(sol, act), model, Ended(found.reached, found.code, found.e @ found.e)
