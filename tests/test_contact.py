@@ -154,7 +154,7 @@ def solve_random(n, seed):
     padded = -(-n // N_RANDOM) * N_RANDOM
     arrays = [np.concatenate([a, np.repeat(a[-1:], padded - n, axis=0)]) for a in obstacles]
     chunks = [_solve_chunk(tuple(jnp.asarray(a[i : i + N_RANDOM]) for a in arrays)) for i in range(0, padded, N_RANDOM)]
-    return obstacles, jnp.asarray(TIP_FORCE), jax.tree.map(lambda *c: jnp.concatenate(c)[:n], *chunks)
+    return obstacles, jnp.asarray(TIP_FORCE), jax.tree.map(lambda *c: np.concatenate(c)[:n], *chunks)
 
 
 @pytest.fixture(scope="module", params=[pytest.param(N_RANDOM, id="64"), pytest.param(1000, id="1000", marks=pytest.mark.slow)])
