@@ -98,14 +98,14 @@ def _retry(out: dict, again, run) -> None:
         tried = run(rows, np.tile(np.asarray(starts, np.int32), len(todo)))
         for j, row in enumerate(rows):
             ends[row].append({k: v[j] for k, v in tried.items()})
-    for row, tried in ends.items():
-        reached = [j for j, end in enumerate(tried) if end["reached"]]
+    for row, its in ends.items():  # its: the row's ends, start by start
+        reached = [j for j, end in enumerate(its) if end["reached"]]
         if reached:
-            best, used = reached[0], tried[: reached[0] + 1]
+            best, used = reached[0], its[: reached[0] + 1]
         else:
-            best, used = min(range(len(tried)), key=lambda j: (int(rank(tried[j]["code"])), float(tried[j]["e2"]), j)), tried
+            best, used = min(range(len(its)), key=lambda j: (int(rank(its[j]["code"])), float(its[j]["e2"]), j)), its
         for k in out:
-            out[k][row] = tried[best][k]
+            out[k][row] = its[best][k]
         out[".iterations"][row] = sum(int(end[".iterations"]) for end in used)
 
 
