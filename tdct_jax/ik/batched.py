@@ -54,6 +54,7 @@ def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
     # next is tried only after one falls short), e.g. one whose phase 2 ran out of steps: not run again
     again = np.flatnonzero((out[".result"] != status.SUCCESS) & ~out["reached"])
     if again.size:  # in whole calls of ``lanes``, the first pass's where it has no more than RETRY_LANES
+        lanes = min(lanes_per_call(n, chunk), RETRY_LANES)
 
         def run(rows, first):
             pad = -rows.size % lanes
@@ -63,7 +64,6 @@ def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
             )
             return {k: v[: rows.size - pad] for k, v in got.items()}
 
-        lanes = min(lanes_per_call(n, chunk), RETRY_LANES)
         _retry(out, again, run)
     names, tree = RESULT_TREES[kernel, jax.tree.structure(base)]
     return jax.tree.unflatten(tree, [jnp.asarray(out[name]) for name in names])
