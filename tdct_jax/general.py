@@ -41,21 +41,8 @@ from .checks import check_range, is_concrete
 from .description import GeneralRobot, channelled_second_moments, is_concrete_tree, section_area
 from .inputs import GeneralActuation, Loads
 from .integrate import rk4
-from .segments import (
-    E3,
-    Carried,
-    Segment,
-    State,
-    carried,
-    carried_strains,
-    orthonormalized,
-    rod_force,
-    rotation_rate,
-    strains,
-    tendon_pb,
-    uncarried,
-    world,
-)
+from .segments import E3, Segment, State, rod_force, strains, tendon_pb
+from .so3 import hat, orthonormalize
 
 
 class Interval(NamedTuple):
@@ -268,9 +255,8 @@ def _segment(robot: GeneralRobot, P: Interval, s) -> Segment:
 
 
 class Carry(NamedTuple):
-    """What RK4 integrates: the State (inside RK4 as ``Carried``), and where needed the arc length s
-    (helical tendons) and each tendon's length from the base, l (n_t,) (displacements); None where
-    not needed."""
+    """What RK4 integrates: the State, and where needed the arc length s (helical tendons) and
+    each tendon's length from the base, l (n_t,) (displacements); None where not needed."""
 
     y: State
     s: jax.Array | None = None
@@ -374,9 +360,9 @@ def integrate(robot: GeneralRobot, load: Loads, gravity, ps: Pieces, c: Carry, s
         def f(_, c: Carry) -> Carry:
             y = c.y
             seg = _segment(robot, P, c.s) if helical else Segment(P.K_se, P.K_bt, P.rho, P.tau, r_fixed, P.backbone)
-            v, u = carried_strains(seg, y)
-            dp = world(y, v)
-            dy = Carried(dp, *rotation_rate(y, u), -P.rho * gravity - f_d, -jnp.cross(dp, y.N))
+            v, u = strains(seg, y.R, y.N, y.M)
+            dp = y.R @ v
+            dy = State(dp, y.R @ hat(u), -P.rho * gravity - f_d, -jnp.cross(dp, y.N))
             dl = None
             if lengths:
                 dl = P.present * jnp.linalg.norm(tendon_pb(seg, v, u), axis=-1)
@@ -385,7 +371,7 @@ def integrate(robot: GeneralRobot, load: Loads, gravity, ps: Pieces, c: Carry, s
         return f
 
     def project(c: Carry) -> Carry:
-        return c._replace(y=orthonormalized(c.y))
+        return c._replace(y=c.y._replace(R=orthonormalize(c.y.R)))
 
     def piece(c: Carry, kf):
         k, f = kf
@@ -394,9 +380,8 @@ def integrate(robot: GeneralRobot, load: Loads, gravity, ps: Pieces, c: Carry, s
         if f is not None:
             F, starts = contact.at_start(load.scene, f, y.p, k.P.radius)
             y = y._replace(N=y.N - F)
-        out = rk4(field(k.P), Carry(carried(y), k.s0 if helical else None, c.l), k.h[None], None, steps, project, path)
+        out = rk4(field(k.P), Carry(y, k.s0 if helical else None, c.l), k.h[None], None, steps, project, path)
         end, nodes = out if path else (out, None)
-        end, nodes = end._replace(y=uncarried(end.y)), None if nodes is None else nodes._replace(y=uncarried(nodes.y))
         return end._replace(s=None), nodes if f is None else (nodes, starts)
 
     return lax.scan(piece, c._replace(s=None), (ps, forces))

@@ -73,7 +73,7 @@ def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-def world(c: Carried, w):
+def _world(c: Carried, w):
     """R w of a body-frame vector w."""
     return c.R1 * w[0] + c.R2 * w[1] + c.R3 * w[2]
 
@@ -81,16 +81,6 @@ def world(c: Carried, w):
 def _body(c: Carried, w):
     """R^T w of a world-frame vector w."""
     return jnp.stack([_dot(c.R1, w), _dot(c.R2, w), _dot(c.R3, w)])
-
-
-def carried_strains(seg: Segment, c: Carried):
-    """``strains`` at a Carried state."""
-    return body_strains(seg, _body(c, c.N), _body(c, c.M))
-
-
-def rotation_rate(c: Carried, u):
-    """The columns of R' = R u^: column j is R (u x e_j)."""
-    return c.R2 * u[2] - c.R3 * u[1], c.R3 * u[0] - c.R1 * u[2], c.R1 * u[1] - c.R2 * u[0]
 
 
 def orthonormalized(c: Carried) -> Carried:
@@ -237,14 +227,16 @@ def vector_field(seg: Segment, gravity):
     """d/ds of the Carried state for one segment; ``gravity`` [m/s^2] in the world frame."""
 
     def f(y: Carried) -> Carried:
-        v, u = carried_strains(seg, y)
-        dp = world(y, v)
+        v, u = body_strains(seg, _body(y, y.N), _body(y, y.M))
+        dp = _world(y, v)
         dM = -jnp.cross(dp, y.N)
         if not seg.tilt:
             # eq. 26 as printed is not the derivative of a total moment; this is what it adds
             # (zero unless the robot twists; docs/model.md, segment "backbone").
-            dM = dM - world(y, jnp.sum(seg.tau[:, None] * jnp.cross(E3[None], jnp.cross(u[None], seg.r)), 0))
-        return Carried(dp, *rotation_rate(y, u), -seg.rho * gravity, dM)
+            dM = dM - _world(y, jnp.sum(seg.tau[:, None] * jnp.cross(E3[None], jnp.cross(u[None], seg.r)), 0))
+        # R' = R u^: column j is R (u x e_j)
+        dR1, dR2, dR3 = y.R2 * u[2] - y.R3 * u[1], y.R3 * u[0] - y.R1 * u[2], y.R1 * u[1] - y.R2 * u[0]
+        return Carried(dp, dR1, dR2, dR3, -seg.rho * gravity, dM)
 
     return f
 
