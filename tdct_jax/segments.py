@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .linalg import solve_spd, solve_spd_entries
+from .linalg import solve_spd
 from .so3 import hat
 
 E3 = np.array([0.0, 0.0, 1.0])
@@ -43,52 +43,6 @@ class State(NamedTuple):
     R: jax.Array
     N: jax.Array
     M: jax.Array
-
-
-class Carried(NamedTuple):
-    """A State as the RK4 scan carries it: R by its columns R e_1, R e_2, R e_3 (world frame), so
-    that the step loop's arrays stay small under forward mode. With R whole, a Jacobian pass in
-    more than 7 directions (the IK's 11) holds R's tangents in one array over XLA:CPU's 512-byte
-    limit for running a loop body in sequence, and every RK4 step goes through its thread pool
-    (docs/performance.md, "Where the time goes")."""
-
-    p: jax.Array
-    R1: jax.Array
-    R2: jax.Array
-    R3: jax.Array
-    N: jax.Array
-    M: jax.Array
-
-
-def carried(y: State) -> Carried:
-    return Carried(y.p, y.R[..., 0], y.R[..., 1], y.R[..., 2], y.N, y.M)
-
-
-def uncarried(c: Carried) -> State:
-    return State(c.p, jnp.stack([c.R1, c.R2, c.R3], -1), c.N, c.M)
-
-
-def _dot(a, b):
-    """a . b of 3-vectors, written out so that XLA fuses it rather than calling a dot kernel."""
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _world(c: Carried, w):
-    """R w of a body-frame vector w."""
-    return c.R1 * w[0] + c.R2 * w[1] + c.R3 * w[2]
-
-
-def _body(c: Carried, w):
-    """R^T w of a world-frame vector w."""
-    return jnp.stack([_dot(c.R1, w), _dot(c.R2, w), _dot(c.R3, w)])
-
-
-def orthonormalized(c: Carried) -> Carried:
-    """``so3.orthonormalize`` on the columns: R_j (3/2) - (1/2) sum_i R_i (R_i . R_j)."""
-    R = (c.R1, c.R2, c.R3)
-    G = [[_dot(R[i], R[j]) for j in range(3)] for i in range(3)]
-    R1, R2, R3 = (1.5 * R[j] - 0.5 * (R[0] * G[0][j] + R[1] * G[1][j] + R[2] * G[2][j]) for j in range(3))
-    return c._replace(R1=R1, R2=R2, R3=R3)
 
 
 @jax.tree_util.register_dataclass
@@ -142,14 +96,11 @@ def tendon_pb(seg: Segment, v, u):
 
 def strains(seg: Segment, R, N, M):
     """Solves the constitutive relations for (v, u) given the world-frame totals N, M."""
-    return body_strains(seg, R.T @ N, R.T @ M)
-
-
-def body_strains(seg: Segment, bf, bm):
-    """(v, u) given the body-frame totals bf = R^T N, bm = R^T M."""
+    bf, bm = R.T @ N, R.T @ M
     if not seg.tilt:
         return _tilt_free(seg, bf, bm)
-    return _constitutive(seg, bf, bm)
+    w = _constitutive(seg, bf, bm)
+    return w[:3], w[3:]
 
 
 def _tilt_free(seg: Segment, bf, bm):
@@ -162,9 +113,8 @@ def _tilt_free(seg: Segment, bf, bm):
 
 
 def _residual_and_jacobian(seg: Segment, w, bf, bm):
-    """The constitutive relations F(w) = 0 for w = (v, u), as (force rows, moment rows), and their
-    Jacobian (eq. 1), symmetric positive definite: diag(K_se, K_bt) + sum_t [I; r_t^]^T P_t [I; r_t^]
-    with P_t >= 0.
+    """The constitutive relations F(w) = 0 for w = (v, u) and their Jacobian (eq. 1), symmetric
+    positive definite: diag(K_se, K_bt) + sum_t [I; r_t^]^T P_t [I; r_t^] with P_t >= 0.
 
     In the backbone the shear rows and columns are replaced by the identity (v_x = v_y = 0).
     """
@@ -173,7 +123,7 @@ def _residual_and_jacobian(seg: Segment, w, bf, bm):
     pb = tendon_pb(seg, v, u)
     norm = jnp.linalg.norm(pb, axis=-1)
     t = pb / norm[:, None]
-    F_force, F_moment = seg.K_se * (v - E3) + tau @ t - bf, seg.K_bt * u + tau @ jnp.cross(seg.r, t) - bm
+    F = jnp.concatenate([seg.K_se * (v - E3) + tau @ t - bf, seg.K_bt * u + tau @ jnp.cross(seg.r, t) - bm])
     rh = hat(seg.r)
     P = (tau / norm)[:, None, None] * (jnp.eye(3)[None] - t[:, :, None] * t[:, None, :])
     PW = P @ rh
@@ -186,32 +136,27 @@ def _residual_and_jacobian(seg: Segment, w, bf, bm):
     shear = 1.0 - seg.backbone
     keep = jnp.stack([shear, shear, *jnp.ones(4)])
     J = J * keep[:, None] * keep[None, :] + jnp.diag(1.0 - keep)
-    return (F_force * keep[:3], F_moment), J
+    return F * keep, J
 
 
 @jax.custom_jvp
 def _constitutive(seg: Segment, bf, bm):
-    """(v, u) solving the constitutive relations, by NEWTON_STEPS Newton steps from the tilt-free
-    guess. v and u apart, not w = (v, u): under forward mode in 11 directions (the IK's) w's
-    tangents would make an array over XLA:CPU's 512-byte limit (``Carried``)."""
+    """w = (v, u) solving the constitutive relations, by NEWTON_STEPS Newton steps from the tilt-free guess."""
 
     def newton_step(_, w):
         F, J = _residual_and_jacobian(seg, w, bf, bm)
-        return w - solve_spd(J, jnp.concatenate(F))
+        return w - solve_spd(J, F)
 
-    w = lax.fori_loop(0, NEWTON_STEPS, newton_step, jnp.concatenate(_tilt_free(seg, bf, bm)))
-    return w[:3], w[3:]
+    return lax.fori_loop(0, NEWTON_STEPS, newton_step, jnp.concatenate(_tilt_free(seg, bf, bm)))
 
 
 @_constitutive.defjvp
 def _constitutive_jvp(primals, tangents):
     """Implicit differentiation at the converged strains: dw = -J^-1 (dF/d inputs) d inputs."""
     seg, bf, bm = primals
-    v, u = _constitutive(seg, bf, bm)
-    w = jnp.concatenate([v, u])
+    w = _constitutive(seg, bf, bm)
     (_, J), (dF, _) = jax.jvp(lambda seg, bf, bm: _residual_and_jacobian(seg, w, bf, bm), primals, tangents)
-    dw = solve_spd_entries(J, [-f[..., i] for f in dF for i in range(3)])
-    return (v, u), (jnp.stack(dw[:3], -1), jnp.stack(dw[3:], -1))
+    return w, -solve_spd(J, dF)
 
 
 def rod_force(seg: Segment, y: State, v, u):
@@ -224,19 +169,17 @@ def rod_force(seg: Segment, y: State, v, u):
 
 
 def vector_field(seg: Segment, gravity):
-    """d/ds of the Carried state for one segment; ``gravity`` [m/s^2] in the world frame."""
+    """d/ds of the State for one segment; ``gravity`` [m/s^2] in the world frame."""
 
-    def f(y: Carried) -> Carried:
-        v, u = body_strains(seg, _body(y, y.N), _body(y, y.M))
-        dp = _world(y, v)
+    def f(y: State) -> State:
+        v, u = strains(seg, y.R, y.N, y.M)
+        dp = y.R @ v
         dM = -jnp.cross(dp, y.N)
         if not seg.tilt:
             # eq. 26 as printed is not the derivative of a total moment; this is what it adds
             # (zero unless the robot twists; docs/model.md, segment "backbone").
-            dM = dM - _world(y, jnp.sum(seg.tau[:, None] * jnp.cross(E3[None], jnp.cross(u[None], seg.r)), 0))
-        # R' = R u^: column j is R (u x e_j)
-        dR1, dR2, dR3 = y.R2 * u[2] - y.R3 * u[1], y.R3 * u[0] - y.R1 * u[2], y.R1 * u[1] - y.R2 * u[0]
-        return Carried(dp, dR1, dR2, dR3, -seg.rho * gravity, dM)
+            dM = dM - y.R @ jnp.sum(seg.tau[:, None] * jnp.cross(E3[None], jnp.cross(u[None], seg.r)), 0)
+        return State(dp, y.R @ hat(u), -seg.rho * gravity, dM)
 
     return f
 

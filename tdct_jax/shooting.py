@@ -23,8 +23,8 @@ from .loads import Actuation, TipLoad
 from .newton import broyden, continuation, lazily
 from .options import SolverOptions
 from .robot import Robot
-from .segments import E3, Segment, State, carried, orthonormalized, paper_transition, uncarried, vector_field
-from .so3 import rotation_columns
+from .segments import E3, Segment, State, paper_transition, vector_field
+from .so3 import orthonormalize, rotation_columns
 
 
 def segments(robot: Robot, act: Actuation, solver: SolverOptions) -> tuple[Segment, Segment]:
@@ -86,8 +86,10 @@ def integrate(segs: Segment, y: State, h, gravity, path: bool = False, steps: in
     (``per_piece``), R projected back onto SO(3) after each step; with ``path`` also the States at
     every node."""
 
-    out = rk4(lambda seg, y: vector_field(seg, gravity)(y), carried(y), h, segs, steps, orthonormalized, path)
-    return tuple(map(uncarried, out)) if path else uncarried(out)
+    def project(y):
+        return y._replace(R=orthonormalize(y.R))
+
+    return rk4(lambda seg, y: vector_field(seg, gravity)(y), y, h, segs, steps, project, path)
 
 
 def shoot(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x, F_c, path: bool = False, mu=0.0):
