@@ -84,6 +84,18 @@ def mesh_for(devices) -> Mesh:
     return Mesh(np.asarray(jax.local_devices() if devices is None else list(devices)), (AXIS,))
 
 
+BATCH_ROTATIONS = {"cpu": "matrix"}
+"""``SolverOptions.rotation`` of a batch by its devices' platform (others: "columns") where the
+solver leaves it None (benchmarks/README.md, "R by its columns in the RK4 scan")."""
+
+
+def batch_solver(solver, platform: str):
+    """``solver`` with the rotation layout of a batch on ``platform`` (``BATCH_ROTATIONS``)."""
+    if solver.rotation is not None:
+        return solver
+    return dataclasses.replace(solver, rotation=BATCH_ROTATIONS.get(platform, "columns"))
+
+
 def default_chunk_size(mesh: Mesh | None = None) -> int:
     """Configurations per compiled call by default: ``CHUNK_SIZES`` for the platform of the mesh's
     devices, times their number (no mesh: one device of the default backend)."""

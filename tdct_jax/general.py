@@ -41,8 +41,7 @@ from .checks import check_range, is_concrete
 from .description import GeneralRobot, channelled_second_moments, is_concrete_tree, section_area
 from .inputs import GeneralActuation, Loads
 from .integrate import rk4
-from .segments import E3, Segment, State, rod_force, strains, tendon_pb
-from .so3 import hat, orthonormalize
+from .segments import E3, Segment, State, carried, rod_force, strains, strains_at, tendon_pb, uncarried
 
 
 class Interval(NamedTuple):
@@ -255,8 +254,9 @@ def _segment(robot: GeneralRobot, P: Interval, s) -> Segment:
 
 
 class Carry(NamedTuple):
-    """What RK4 integrates: the State, and where needed the arc length s (helical tendons) and
-    each tendon's length from the base, l (n_t,) (displacements); None where not needed."""
+    """What RK4 integrates: the State (inside RK4 as ``segments.carried`` gives it), and where needed the arc length s
+    (helical tendons) and each tendon's length from the base, l (n_t,) (displacements); None where
+    not needed."""
 
     y: State
     s: jax.Array | None = None
@@ -342,7 +342,9 @@ def pieces(pl: Plan, steps: int, K: int, every: int | None = None) -> tuple[Piec
     return jax.tree.map(lambda a: a.reshape(K, c // g, *a.shape[1:]), ps), int(g)
 
 
-def integrate(robot: GeneralRobot, load: Loads, gravity, ps: Pieces, c: Carry, steps: int, path: bool = False, forces=None):
+def integrate(
+    robot: GeneralRobot, load: Loads, gravity, ps: Pieces, c: Carry, steps: int, path: bool = False, forces=None, rotation=None
+):
     """RK4 over consecutive pieces of ``steps`` steps (``pieces``, one shooting interval), each
     after its jump, from the Carry c; tendon lengths where c.l is not None, arc length for helical
     tendons. Returns the end Carry and the nodes (with ``path``: (pieces, steps + 1, ...), each
@@ -351,7 +353,7 @@ def integrate(robot: GeneralRobot, load: Loads, gravity, ps: Pieces, c: Carry, s
     ``forces``: each piece's contact forces against ``load.scene``'s obstacles [N], (pieces,
     n_o), or None (no contact): at its start the piece's N jumps by the point force -sum_o
     lambda_o n_o(p) (contact.py), and the nodes come with each piece start's Starts (position and
-    gaps to the obstacles)."""
+    gaps to the obstacles). ``rotation``: ``SolverOptions.rotation``."""
     helical, lengths = is_helical(robot), c.l is not None
     f_d = load.distributed_force
     r_fixed = None if helical else tendon_positions(robot, 0.0)[0]
@@ -360,9 +362,9 @@ def integrate(robot: GeneralRobot, load: Loads, gravity, ps: Pieces, c: Carry, s
         def f(_, c: Carry) -> Carry:
             y = c.y
             seg = _segment(robot, P, c.s) if helical else Segment(P.K_se, P.K_bt, P.rho, P.tau, r_fixed, P.backbone)
-            v, u = strains(seg, y.R, y.N, y.M)
-            dp = y.R @ v
-            dy = State(dp, y.R @ hat(u), -P.rho * gravity - f_d, -jnp.cross(dp, y.N))
+            v, u = strains_at(seg, y)
+            dp = y.world(v)
+            dy = y.rate(dp, u, -P.rho * gravity - f_d, -jnp.cross(dp, y.N))
             dl = None
             if lengths:
                 dl = P.present * jnp.linalg.norm(tendon_pb(seg, v, u), axis=-1)
@@ -371,7 +373,7 @@ def integrate(robot: GeneralRobot, load: Loads, gravity, ps: Pieces, c: Carry, s
         return f
 
     def project(c: Carry) -> Carry:
-        return c._replace(y=c.y._replace(R=orthonormalize(c.y.R)))
+        return c._replace(y=c.y.orthonormalized())
 
     def piece(c: Carry, kf):
         k, f = kf
@@ -380,8 +382,9 @@ def integrate(robot: GeneralRobot, load: Loads, gravity, ps: Pieces, c: Carry, s
         if f is not None:
             F, starts = contact.at_start(load.scene, f, y.p, k.P.radius)
             y = y._replace(N=y.N - F)
-        out = rk4(field(k.P), Carry(y, k.s0 if helical else None, c.l), k.h[None], None, steps, project, path)
+        out = rk4(field(k.P), Carry(carried(y, rotation), k.s0 if helical else None, c.l), k.h[None], None, steps, project, path)
         end, nodes = out if path else (out, None)
+        end, nodes = end._replace(y=uncarried(end.y)), None if nodes is None else nodes._replace(y=uncarried(nodes.y))
         return end._replace(s=None), nodes if f is None else (nodes, starts)
 
     return lax.scan(piece, c._replace(s=None), (ps, forces))
@@ -448,7 +451,7 @@ def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solv
         where = contact.interior_pieces(P, solver.steps, g, scene.every)
         lam = x[6 + n_d :].reshape(-1, scene.n_obstacles) * F_c
         forces = jnp.zeros((ps.h.size, scene.n_obstacles)).at[where].set(lam[:-1])
-    end, out = integrate(robot, load, gravity, ps, Carry(y0, None, l0), g, path, forces)
+    end, out = integrate(robot, load, gravity, ps, Carry(y0, None, l0), g, path, forces, solver.rotation)
     nodes, starts = (out, None) if scene is None else out
     if scene is not None:
         # a candidate inside a zero-length interval shares its point with the next one: off

@@ -14,6 +14,13 @@ def solve_spd(A, b):
     Unrolled over the static n; b has shape (..., n). Only the lower triangle of A is read.
     """
     n = A.shape[-1]
+    return jnp.stack(solve_spd_entries(A, [b[..., i] for i in range(n)]), axis=-1)
+
+
+def solve_spd_entries(A, b: list) -> list:
+    """``solve_spd`` on the entries of b, a list of n arrays (...,), returning x's entries: no array
+    holds a whole b or x (under ``vmap``, each would be one array with the batch inside)."""
+    n = A.shape[-1]
     L = [[None] * n for _ in range(n)]
     D = [None] * n
     for j in range(n):
@@ -22,8 +29,8 @@ def solve_spd(A, b):
             L[i][j] = (A[..., i, j] - sum(L[i][k] * L[j][k] * D[k] for k in range(j))) / D[j]
     z = [None] * n
     for i in range(n):
-        z[i] = b[..., i] - sum(L[i][k] * z[k] for k in range(i))
+        z[i] = b[i] - sum(L[i][k] * z[k] for k in range(i))
     x = [None] * n
     for i in reversed(range(n)):
         x[i] = z[i] / D[i] - sum(L[k][i] * x[k] for k in range(i + 1, n))
-    return jnp.stack(x, axis=-1)
+    return x

@@ -164,14 +164,16 @@ def run(robot, act, load, gravity, solver, x, starts, F_c, path: bool = False) -
     y0 = State(jnp.zeros((K, 3)), R, N, M)
     if not isinstance(robot, GeneralRobot):
         (segs, h), g = _intervals(robot, act, solver)
-        out = jax.vmap(lambda seg, h, y: shooting.integrate(seg, y, h, gravity, path, g))(segs, h, y0)
+        out = jax.vmap(lambda seg, h, y: shooting.integrate(seg, y, h, gravity, path, g, solver.rotation))(segs, h, y0)
         y, nodes = out if path else (out, None)
         return Run(y, jnp.zeros((K, 0)), act, None, nodes)
     act = general.with_driven(act, x, F_c)
     pl = general.plan(robot, act, load, gravity)
     ps, g = general.pieces(pl, solver.steps, K)
     l0 = jnp.zeros((K, robot.n_tendons)) if act.driven or path else None
-    end, nodes = jax.vmap(lambda p, c: general.integrate(robot, load, gravity, p, c, g, path))(ps, general.Carry(y0, None, l0))
+    end, nodes = jax.vmap(lambda p, c: general.integrate(robot, load, gravity, p, c, g, path, rotation=solver.rotation))(
+        ps, general.Carry(y0, None, l0)
+    )
     return Run(end.y, jnp.zeros((K, 0)) if l0 is None else end.l, act, pl, nodes)
 
 
@@ -289,12 +291,12 @@ def coarse(robot, act, load, gravity, solver, x, F_c) -> Unknowns:
         act = general.with_driven(act, x, F_c)
         ps, g = general.pieces(general.plan(robot, act, load, gravity), solver.steps, solver.intervals)
         flat = jax.tree.map(lambda a: a.reshape(-1, *a.shape[2:]), ps)._replace(h=ps.h.reshape(-1) * g)
-        _, nodes = general.integrate(robot, load, gravity, flat, general.Carry(y0), 1, path=True)
+        _, nodes = general.integrate(robot, load, gravity, flat, general.Carry(y0), 1, path=True, rotation=solver.rotation)
         ys = jax.tree.map(lambda a: a[ps.h.shape[1] - 1 :: ps.h.shape[1], 1][:-1], nodes.y)
     else:
         (segs, h), g = _intervals(robot, act, solver)
         lengths = jnp.repeat(h, g, axis=1).sum(1)
-        _, ys = shooting.integrate(jax.tree.map(lambda a: a[:, 0], segs), y0, lengths, gravity, path=True)
+        _, ys = shooting.integrate(jax.tree.map(lambda a: a[:, 0], segs), y0, lengths, gravity, True, 1, solver.rotation)
         ys = jax.tree.map(lambda a: a[1:-1], ys)
     R = ys.R
     for _ in range(ORTHONORMALIZE):  # a long step leaves R off SO(3); Newton's steps keep it on

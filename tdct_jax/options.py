@@ -9,6 +9,7 @@ from .tree import pytree, set_fields, static
 
 TRANSITIONS = ("balanced", "paper")
 TENDON_MODELS = ("exact", "paper")
+ROTATIONS = ("columns", "matrix")
 STEPS = 20
 """Default RK4 steps per segment: the fewest that keep every tip within 1 um of the converged
 solution over 2,500 envelope points (benchmarks/accuracy_steps.py: worst 0.65 um at 20, 1.5 um at
@@ -46,6 +47,12 @@ class SolverOptions:
             GeneralRobot's P * steps (P breakpoint intervals, ``steps`` each; every breakpoint an
             interval boundary when K = P q, q dividing ``steps``); K must divide it, checked
             when a solve is traced (ValueError naming the allowed values).
+        rotation: how RK4 carries the rotation R (static; the same numbers to round-off):
+            "columns", R's three columns as three arrays, or "matrix", R whole. Columns keep a
+            Jacobian pass in more than 7 directions (the IK's) running each RK4 step in sequence
+            on XLA:CPU, and run GPU batches faster; the matrix runs CPU batches faster. None
+            (default): "matrix" in a sweep or batched IK on a CPU, "columns" everywhere else
+            (benchmarks/README.md, "R by its columns in the RK4 scan").
     """
 
     steps: int = static(default=STEPS)
@@ -55,11 +62,14 @@ class SolverOptions:
     max_iter: int = MAX_ITER
     stages: tuple = static(default=STAGES)
     intervals: int = static(default=1)
+    rotation: str | None = static(default=None)
 
     def __post_init__(self):
         set_fields(self, steps=check_integer("steps", self.steps), intervals=check_integer("intervals", self.intervals))
         check_choice("transition", self.transition, TRANSITIONS)
         check_choice("tendon_model", self.tendon_model, TENDON_MODELS)
+        if self.rotation is not None:
+            check_choice("rotation", self.rotation, ROTATIONS)
         stages = tuple(self.stages) if isinstance(self.stages, (tuple, list)) else None
         if not stages or any(isinstance(k, bool) or not isinstance(k, int) for k in stages):
             raise ValueError(f"stages = {self.stages!r}: expected a non-empty tuple of positive integers, e.g. {STAGES}")

@@ -23,6 +23,7 @@ condition is N(L) = F_e, M(L) = M_e, and RK4 conserves the global force balance 
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import NamedTuple
 
 import jax
@@ -30,19 +31,84 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .linalg import solve_spd
-from .so3 import hat
+from .linalg import solve_spd, solve_spd_entries
+from .so3 import hat, orthonormalize
 
 E3 = np.array([0.0, 0.0, 1.0])
 
 
 class State(NamedTuple):
-    """Rod state along s: p (3,) [m], R (3, 3), total force N (3,) [N], total moment M (3,) [N m]."""
+    """Rod state along s: p (3,) [m], R (3, 3), total force N (3,) [N], total moment M (3,) [N m].
+
+    RK4 carries it as it is (``SolverOptions.rotation`` "matrix") or as ``Carried`` ("columns");
+    the vector field reads R through the methods both have."""
 
     p: jax.Array
     R: jax.Array
     N: jax.Array
     M: jax.Array
+
+    def world(self, w):
+        """R w of a body-frame vector w."""
+        return self.R @ w
+
+    def body(self, w):
+        """R^T w of a world-frame vector w."""
+        return self.R.T @ w
+
+    def rate(self, dp, u, dN, dM) -> State:
+        """d/ds of this state: p' = dp, R' = R u^, N' = dN, M' = dM."""
+        return State(dp, self.R @ hat(u), dN, dM)
+
+    def orthonormalized(self) -> State:
+        return self._replace(R=orthonormalize(self.R))
+
+
+class Carried(NamedTuple):
+    """A State with R by its columns R e_1, R e_2, R e_3 (world frame), each an array of its own.
+    With R whole, a Jacobian pass in more than 7 directions (the IK's 11) holds R's tangents in
+    one array over XLA:CPU's 512-byte limit for running a loop body in sequence, and every RK4
+    step goes through its thread pool (benchmarks/README.md, "R by its columns in the RK4 scan")."""
+
+    p: jax.Array
+    R1: jax.Array
+    R2: jax.Array
+    R3: jax.Array
+    N: jax.Array
+    M: jax.Array
+
+    def world(self, w):
+        return self.R1 * w[0] + self.R2 * w[1] + self.R3 * w[2]
+
+    def body(self, w):
+        return jnp.stack([_dot(self.R1, w), _dot(self.R2, w), _dot(self.R3, w)])
+
+    def rate(self, dp, u, dN, dM) -> Carried:
+        """As ``State.rate``: column j of R u^ is R (u x e_j)."""
+        R1, R2, R3 = self.R1, self.R2, self.R3
+        return Carried(dp, R2 * u[2] - R3 * u[1], R3 * u[0] - R1 * u[2], R1 * u[1] - R2 * u[0], dN, dM)
+
+    def orthonormalized(self) -> Carried:
+        """``so3.orthonormalize`` on the columns: R_j (3/2) - (1/2) sum_i R_i (R_i . R_j)."""
+        R = (self.R1, self.R2, self.R3)
+        G = [[_dot(R[i], R[j]) for j in range(3)] for i in range(3)]
+        R1, R2, R3 = (1.5 * R[j] - 0.5 * (R[0] * G[0][j] + R[1] * G[1][j] + R[2] * G[2][j]) for j in range(3))
+        return self._replace(R1=R1, R2=R2, R3=R3)
+
+
+def _dot(a, b):
+    """a . b of 3-vectors, written out so that XLA fuses it rather than calling a dot kernel."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def carried(y: State, rotation: str | None = None):
+    """The state RK4 carries for ``SolverOptions.rotation``: y itself ("matrix"), else Carried."""
+    return y if rotation == "matrix" else Carried(y.p, y.R[..., 0], y.R[..., 1], y.R[..., 2], y.N, y.M)
+
+
+def uncarried(c) -> State:
+    """The State of what ``carried`` gave (leading axes kept: a path's nodes)."""
+    return c if isinstance(c, State) else State(c.p, jnp.stack([c.R1, c.R2, c.R3], -1), c.N, c.M)
 
 
 @jax.tree_util.register_dataclass
@@ -96,11 +162,20 @@ def tendon_pb(seg: Segment, v, u):
 
 def strains(seg: Segment, R, N, M):
     """Solves the constitutive relations for (v, u) given the world-frame totals N, M."""
-    bf, bm = R.T @ N, R.T @ M
+    return body_strains(seg, R.T @ N, R.T @ M)
+
+
+def strains_at(seg: Segment, y: State | Carried):
+    """``strains`` at a state as RK4 carries it."""
+    return body_strains(seg, y.body(y.N), y.body(y.M), isinstance(y, Carried))
+
+
+def body_strains(seg: Segment, bf, bm, split: bool = False):
+    """(v, u) given the body-frame totals bf = R^T N, bm = R^T M (``split``: ``_constitutive``)."""
     if not seg.tilt:
         return _tilt_free(seg, bf, bm)
-    w = _constitutive(seg, bf, bm)
-    return w[:3], w[3:]
+    w = _constitutive(split, seg, bf, bm)
+    return w if split else (w[:3], w[3:])
 
 
 def _tilt_free(seg: Segment, bf, bm):
@@ -112,9 +187,10 @@ def _tilt_free(seg: Segment, bf, bm):
     return v, u
 
 
-def _residual_and_jacobian(seg: Segment, w, bf, bm):
-    """The constitutive relations F(w) = 0 for w = (v, u) and their Jacobian (eq. 1), symmetric
-    positive definite: diag(K_se, K_bt) + sum_t [I; r_t^]^T P_t [I; r_t^] with P_t >= 0.
+def _residual_and_jacobian(seg: Segment, w, bf, bm, split: bool):
+    """The constitutive relations F(w) = 0 for w = (v, u) (with ``split``: as (force rows, moment
+    rows)) and their Jacobian (eq. 1), symmetric positive definite: diag(K_se, K_bt) +
+    sum_t [I; r_t^]^T P_t [I; r_t^] with P_t >= 0.
 
     In the backbone the shear rows and columns are replaced by the identity (v_x = v_y = 0).
     """
@@ -123,7 +199,7 @@ def _residual_and_jacobian(seg: Segment, w, bf, bm):
     pb = tendon_pb(seg, v, u)
     norm = jnp.linalg.norm(pb, axis=-1)
     t = pb / norm[:, None]
-    F = jnp.concatenate([seg.K_se * (v - E3) + tau @ t - bf, seg.K_bt * u + tau @ jnp.cross(seg.r, t) - bm])
+    F_force, F_moment = seg.K_se * (v - E3) + tau @ t - bf, seg.K_bt * u + tau @ jnp.cross(seg.r, t) - bm
     rh = hat(seg.r)
     P = (tau / norm)[:, None, None] * (jnp.eye(3)[None] - t[:, :, None] * t[:, None, :])
     PW = P @ rh
@@ -136,27 +212,35 @@ def _residual_and_jacobian(seg: Segment, w, bf, bm):
     shear = 1.0 - seg.backbone
     keep = jnp.stack([shear, shear, *jnp.ones(4)])
     J = J * keep[:, None] * keep[None, :] + jnp.diag(1.0 - keep)
-    return F * keep, J
+    return ((F_force * keep[:3], F_moment) if split else jnp.concatenate([F_force, F_moment]) * keep), J
 
 
-@jax.custom_jvp
-def _constitutive(seg: Segment, bf, bm):
-    """w = (v, u) solving the constitutive relations, by NEWTON_STEPS Newton steps from the tilt-free guess."""
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _constitutive(split: bool, seg: Segment, bf, bm):
+    """w = (v, u) solving the constitutive relations, by NEWTON_STEPS Newton steps from the
+    tilt-free guess; with ``split`` as (v, u), tangents too: under forward mode in 11 directions
+    (the IK's) w's tangents would make an array over XLA:CPU's 512-byte limit (``Carried``), while
+    a vmapped CPU batch runs faster with w whole."""
 
     def newton_step(_, w):
-        F, J = _residual_and_jacobian(seg, w, bf, bm)
-        return w - solve_spd(J, F)
+        F, J = _residual_and_jacobian(seg, w, bf, bm, split)
+        return w - solve_spd(J, jnp.concatenate(F) if split else F)
 
-    return lax.fori_loop(0, NEWTON_STEPS, newton_step, jnp.concatenate(_tilt_free(seg, bf, bm)))
+    w = lax.fori_loop(0, NEWTON_STEPS, newton_step, jnp.concatenate(_tilt_free(seg, bf, bm)))
+    return (w[:3], w[3:]) if split else w
 
 
 @_constitutive.defjvp
-def _constitutive_jvp(primals, tangents):
+def _constitutive_jvp(split, primals, tangents):
     """Implicit differentiation at the converged strains: dw = -J^-1 (dF/d inputs) d inputs."""
     seg, bf, bm = primals
-    w = _constitutive(seg, bf, bm)
-    (_, J), (dF, _) = jax.jvp(lambda seg, bf, bm: _residual_and_jacobian(seg, w, bf, bm), primals, tangents)
-    return w, -solve_spd(J, dF)
+    out = _constitutive(split, seg, bf, bm)
+    w = jnp.concatenate(out) if split else out
+    (_, J), (dF, _) = jax.jvp(lambda seg, bf, bm: _residual_and_jacobian(seg, w, bf, bm, split), primals, tangents)
+    if not split:
+        return out, -solve_spd(J, dF)
+    dw = solve_spd_entries(J, [-f[..., i] for f in dF for i in range(3)])
+    return out, (jnp.stack(dw[:3], -1), jnp.stack(dw[3:], -1))
 
 
 def rod_force(seg: Segment, y: State, v, u):
@@ -169,17 +253,17 @@ def rod_force(seg: Segment, y: State, v, u):
 
 
 def vector_field(seg: Segment, gravity):
-    """d/ds of the State for one segment; ``gravity`` [m/s^2] in the world frame."""
+    """d/ds of the state (State or Carried) for one segment; ``gravity`` [m/s^2] in the world frame."""
 
-    def f(y: State) -> State:
-        v, u = strains(seg, y.R, y.N, y.M)
-        dp = y.R @ v
+    def f(y: State | Carried):
+        v, u = strains_at(seg, y)
+        dp = y.world(v)
         dM = -jnp.cross(dp, y.N)
         if not seg.tilt:
             # eq. 26 as printed is not the derivative of a total moment; this is what it adds
             # (zero unless the robot twists; docs/model.md, segment "backbone").
-            dM = dM - y.R @ jnp.sum(seg.tau[:, None] * jnp.cross(E3[None], jnp.cross(u[None], seg.r)), 0)
-        return State(dp, y.R @ hat(u), -seg.rho * gravity, dM)
+            dM = dM - y.world(jnp.sum(seg.tau[:, None] * jnp.cross(E3[None], jnp.cross(u[None], seg.r)), 0))
+        return y.rate(dp, u, -seg.rho * gravity, dM)
 
     return f
 

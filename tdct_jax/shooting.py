@@ -23,8 +23,8 @@ from .loads import Actuation, TipLoad
 from .newton import broyden, continuation, lazily
 from .options import SolverOptions
 from .robot import Robot
-from .segments import E3, Segment, State, paper_transition, vector_field
-from .so3 import orthonormalize, rotation_columns
+from .segments import E3, Segment, State, carried, paper_transition, uncarried, vector_field
+from .so3 import rotation_columns
 
 
 def segments(robot: Robot, act: Actuation, solver: SolverOptions) -> tuple[Segment, Segment]:
@@ -81,15 +81,13 @@ def per_piece(seg: Segment, length, n: int):
     return jax.tree.map(lambda a: jnp.asarray(a)[None], seg), jnp.reshape(length / n, (1,))
 
 
-def integrate(segs: Segment, y: State, h, gravity, path: bool = False, steps: int = 1):
+def integrate(segs: Segment, y: State, h, gravity, path: bool = False, steps: int = 1, rotation=None):
     """RK4 from the State y over pieces of ``steps`` steps of length h[j] with segments ``segs``
-    (``per_piece``), R projected back onto SO(3) after each step; with ``path`` also the States at
-    every node."""
-
-    def project(y):
-        return y._replace(R=orthonormalize(y.R))
-
-    return rk4(lambda seg, y: vector_field(seg, gravity)(y), y, h, segs, steps, project, path)
+    (``per_piece``), R carried as ``rotation`` says (``SolverOptions.rotation``) and projected back
+    onto SO(3) after each step; with ``path`` also the States at every node."""
+    y = carried(y, rotation)
+    out = rk4(lambda seg, y: vector_field(seg, gravity)(y), y, h, segs, steps, lambda y: y.orthonormalized(), path)
+    return tuple(map(uncarried, out)) if path else uncarried(out)
 
 
 def shoot(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x, F_c, path: bool = False, mu=0.0):
@@ -110,16 +108,16 @@ def shoot(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOp
         # one scan over both segments: the state is continuous at s = d, and both segments share
         # the vector field's code, compiled once
         segs, h = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), (seg_b, h_b), (seg_s, h_s))
-        out = integrate(segs, y0, h, gravity, path, n)
+        out = integrate(segs, y0, h, gravity, path, n, solver.rotation)
         y_L, ys = out if path else (out, None)
     else:
-        out_b = integrate(seg_b, y0, h_b, gravity, path, n)
+        out_b = integrate(seg_b, y0, h_b, gravity, path, n, solver.rotation)
         y_d = out_b[0] if path else out_b
         if solver.transition == "paper":
             jumped = paper_transition(back, sil, y_d)
             inside = (d > 0) & (d < L)
             y_d = jax.tree.map(lambda a, b: jnp.where(inside, a, b), jumped, y_d)
-        out_s = integrate(seg_s, y_d, h_s, gravity, path, n)
+        out_s = integrate(seg_s, y_d, h_s, gravity, path, n, solver.rotation)
         y_L = out_s[0] if path else out_s
         ys = jax.tree.map(lambda a, b: jnp.concatenate([a, b[1:]]), out_b[1], out_s[1]) if path else None
     res = jnp.concatenate([(y_L.N - load.force) / F_c, (y_L.M - load.moment) / (F_c * L)])

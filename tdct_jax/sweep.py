@@ -30,7 +30,7 @@ import numpy as np
 from jax import lax
 
 from . import __version__, fields, general, status
-from .batch import Kernel, chunk_lanes, iter_batched, joined, mesh_for
+from .batch import Kernel, batch_solver, chunk_lanes, iter_batched, joined, mesh_for
 from .checkpoint import Partial, complete, digest
 from .checks import as_array, check_output, check_range
 from .description import GeneralRobot
@@ -348,6 +348,7 @@ def _plan(
     if first == last:
         raise ValueError(f"{rows} {'paths' if warm_start else 'points'} cannot be split over jax.process_count() = {n_proc}")
     kernel = Kernel(function, (("shapes", shapes), ("compliance", compliance)), mesh_for(devices), retire=not warm_start)
+    base = (*base[:4], batch_solver(base[4], kernel.mesh.devices.flat[0].platform))
     mine = {name: v[first:last] for name, v in points.items()}
     return _Plan(kernel, base, mine, shape, axes, 1 + warm_start, first)
 

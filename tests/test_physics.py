@@ -10,7 +10,7 @@ from scipy.special import ellipe, ellipeinc, ellipk, ellipkinc
 import tdct_jax as tdct
 from tdct_jax import shooting
 from tdct_jax.loads import gravity_vector
-from tdct_jax.segments import State, vector_field
+from tdct_jax.segments import State, carried, uncarried, vector_field
 from tdct_jax.so3 import orthonormalize
 
 G = np.array([0.0, -9.81, 0.0])
@@ -166,7 +166,7 @@ def test_rk4_equals_classical_steps_written_out(paper_case):
     y = State(np.zeros(3), np.eye(3), *np.split(np.asarray(sol.base_wrench), 2))
     ys = [y]
     for seg, length in zip(shooting.segments(robot, act, solver), (act.insertion, robot.length - act.insertion), strict=True):
-        f, h = vector_field(seg, g), length / solver.steps
+        f, h = (lambda y, seg=seg: uncarried(vector_field(seg, g)(carried(y)))), length / solver.steps
         for _ in range(solver.steps):
             k1 = f(y)
             k2 = f(axpy(h / 2, k1, y))

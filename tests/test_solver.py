@@ -70,7 +70,7 @@ size, and through its thread pool otherwise (ThunkExecutor's execute_sequential_
 
 def _large_arrays_in_loops(hlo: str, limit: int) -> list:
     """Instructions of compiled HLO text, inside while-loop bodies and conditions, whose result or
-    an operand holds an array of more than ``limit`` bytes."""
+    an operand holds an array of more than ``limit`` bytes, as "computation: instruction"."""
     loops = set(re.findall(r"(?:body|condition)=%?([\w.\-]+)", hlo))
     size = {"f64": 8, "s64": 8, "f32": 4, "s32": 4, "u32": 4, "pred": 1, "u8": 1, "s8": 1}
 
@@ -107,6 +107,29 @@ def test_newton_pass_loops_run_in_sequence(paper_case):
     hlo = jax.jit(jacobian).lower(robot, act, load, g, x).compile().as_text()
     assert "while" in hlo
     assert _large_arrays_in_loops(hlo, SEQUENTIAL_BYTES) == []
+
+
+@pytest.mark.parametrize("rotation", ["columns", "matrix"])
+def test_rk4_steps_of_an_ik_pass_run_in_sequence_with_r_by_columns(paper_case, rotation):
+    """The IK's augmented pass differentiates the tip residual in 11 directions (6 shooting
+    unknowns, 4 tensions, the insertion). With R carried whole its tangents make an (11, 3, 3)
+    array, over SEQUENTIAL_BYTES, and every RK4 step runs through the thread pool; carried by its
+    columns (SolverOptions.rotation "columns", the default outside CPU batches) no array of an
+    RK4 step is over it: only the loop over the two segments' pieces, which runs twice a pass,
+    may hold one (a piece's parameters and their tangents)."""
+    robot, act, load, sol = paper_case
+    g = gravity_vector(tdct.STANDARD_GRAVITY)
+    F_c = shooting.force_scale(robot, act, load, g)
+    z = jnp.concatenate([shooting.scaled(robot, sol.base_wrench, F_c), act.tensions, jnp.reshape(act.insertion, 1)])
+    solver = tdct.SolverOptions(rotation=rotation)
+
+    def residual(z):
+        moved = tdct.Actuation(z[6:10], z[10])
+        return shooting.shoot(robot, moved, load, g, solver, z[:6], F_c)[0]
+
+    hlo = jax.jit(jax.jacfwd(residual)).lower(z).compile().as_text()
+    loops = {instruction.split(":")[0] for instruction in _large_arrays_in_loops(hlo, SEQUENTIAL_BYTES)}
+    assert (len(loops) <= 1) == (rotation == "columns"), loops
 
 
 def test_lazily_keeps_its_branch_inside_its_loop_under_vmap():
@@ -172,3 +195,16 @@ def test_single_solves_go_to_the_cpu_where_a_gpu_is_the_default(robot, monkeypat
     assert put == [cpu] and args[3].devices() == {cpu}  # gravity: jit runs where committed arguments are
     jax.jit(lambda g: arguments(g)[3])(np.zeros(3))
     assert put == [cpu]  # traced arguments (jit, vmap, sweeps) stay where they are
+
+
+@pytest.mark.parametrize("general", [False, True], ids=["Robot", "to_general"])
+def test_rotation_layouts_give_the_same_solve(paper_case, general):
+    """R carried whole or by its columns (SolverOptions.rotation) is the same arithmetic in
+    another order: the same Newton steps, shapes and base wrenches to round-off."""
+    robot, act, load, _ = paper_case
+    if general:
+        robot, act = robot.to_general(), tdct.GeneralActuation(act.tensions, [act.insertion])
+    sols = [tdct.solve(robot, act, load, solver=tdct.SolverOptions(rotation=r)) for r in ("columns", "matrix")]
+    assert int(sols[0].iterations) == int(sols[1].iterations)
+    np.testing.assert_allclose(sols[0].position, sols[1].position, rtol=0, atol=1e-15)
+    assert rel_err(sols[0].base_wrench, sols[1].base_wrench) < 1e-13

@@ -11,7 +11,7 @@ import numpy as np
 from jax import lax
 
 from .. import status
-from ..batch import Kernel, default_chunk_size, lanes_per_call, run_batched
+from ..batch import Kernel, batch_solver, default_chunk_size, lanes_per_call, run_batched
 from ..checks import is_concrete
 from .driver import _solve_ik, rank
 from .problem import IKResult, Plan, Problem, _tip_force, scaled_inputs
@@ -46,6 +46,7 @@ def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
     own = tuple(i for i, leaf in enumerate(leaves) if np.ndim(leaf) >= 1)  # the rest (weights) are shared
     points = {f"in{i}": np.asarray(leaves[i]) for i in own} | {"v0": np.asarray(v0)}
     kernel = Kernel(_ik_point, (("plan", plan), ("tree", tree), ("own", own)))
+    prob = prob._replace(solver=batch_solver(prob.solver, jax.default_backend()))
     base = (prob._replace(target=None, load=None if loads else prob.load), wrench0, leaves)
     chunk = CHUNK_SIZE if jax.default_backend() == "cpu" else default_chunk_size()
     n = len(v0)
