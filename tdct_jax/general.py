@@ -254,9 +254,9 @@ def _segment(robot: GeneralRobot, P: Interval, s) -> Segment:
 
 
 class Carry(NamedTuple):
-    """What RK4 integrates: the State (inside RK4 as ``segments.carried`` gives it), and where needed the arc length s
-    (helical tendons) and each tendon's length from the base, l (n_t,) (displacements); None where
-    not needed."""
+    """What RK4 integrates: the State (inside RK4 as ``segments.carried`` gives it), and where
+    needed the arc length s (helical tendons) and each tendon's length from the base, l (n_t,)
+    (displacements); None where not needed."""
 
     y: State
     s: jax.Array | None = None
