@@ -89,18 +89,22 @@ BATCH_ROTATIONS = {"cpu": "matrix"}
 solver leaves it None (benchmarks/README.md, "R by its columns in the RK4 scan")."""
 
 
-def batch_solver(solver, platform: str):
-    """``solver`` with the rotation layout of a batch on ``platform`` (``BATCH_ROTATIONS``)."""
+def batch_solver(solver, mesh: Mesh | None = None):
+    """``solver`` with the rotation layout of a batch on the mesh's devices (``BATCH_ROTATIONS``;
+    no mesh: the default backend)."""
     if solver.rotation is not None:
         return solver
-    return dataclasses.replace(solver, rotation=BATCH_ROTATIONS.get(platform, "columns"))
+    return dataclasses.replace(solver, rotation=BATCH_ROTATIONS.get(_platform(mesh), "columns"))
+
+
+def _platform(mesh: Mesh | None) -> str:
+    return jax.default_backend() if mesh is None else mesh.devices.flat[0].platform
 
 
 def default_chunk_size(mesh: Mesh | None = None) -> int:
     """Configurations per compiled call by default: ``CHUNK_SIZES`` for the platform of the mesh's
     devices, times their number (no mesh: one device of the default backend)."""
-    platform = jax.default_backend() if mesh is None else mesh.devices.flat[0].platform
-    return CHUNK_SIZES.get(platform, CHUNK_SIZES["cpu"]) * (1 if mesh is None else mesh.size)
+    return CHUNK_SIZES.get(_platform(mesh), CHUNK_SIZES["cpu"]) * (1 if mesh is None else mesh.size)
 
 
 def lanes_per_call(n: int, chunk_size: int, n_devices: int = 1) -> int:

@@ -348,7 +348,7 @@ def _plan(
     if first == last:
         raise ValueError(f"{rows} {'paths' if warm_start else 'points'} cannot be split over jax.process_count() = {n_proc}")
     kernel = Kernel(function, (("shapes", shapes), ("compliance", compliance)), mesh_for(devices), retire=not warm_start)
-    base = (*base[:4], batch_solver(base[4], kernel.mesh.devices.flat[0].platform))
+    base = (*base[:4], batch_solver(base[4], kernel.mesh))
     mine = {name: v[first:last] for name, v in points.items()}
     return _Plan(kernel, base, mine, shape, axes, 1 + warm_start, first)
 

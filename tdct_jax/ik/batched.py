@@ -46,7 +46,7 @@ def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
     own = tuple(i for i, leaf in enumerate(leaves) if np.ndim(leaf) >= 1)  # the rest (weights) are shared
     points = {f"in{i}": np.asarray(leaves[i]) for i in own} | {"v0": np.asarray(v0)}
     kernel = Kernel(_ik_point, (("plan", plan), ("tree", tree), ("own", own)))
-    prob = prob._replace(solver=batch_solver(prob.solver, jax.default_backend()))
+    prob = prob._replace(solver=batch_solver(prob.solver))
     base = (prob._replace(target=None, load=None if loads else prob.load), wrench0, leaves)
     chunk = CHUNK_SIZE if jax.default_backend() == "cpu" else default_chunk_size()
     n = len(v0)
