@@ -135,17 +135,19 @@ def broyden(F, x0, tol, max_iter):
     return x, r, out, it, code.astype(jnp.int32)
 
 
-def continuation(F_at, x0, x_ramp, tol, max_iter, stages=(1, 4, 16), solve=newton) -> Root:
+def continuation(F_at, x0, x_ramp, tol, max_iter, stages=(1, 4, 16), solve=newton, count=None) -> Root:
     """Solves F_at(1)(x)[0] = 0 from x0, ramping the loads in stages when plain Newton fails.
 
     F_at(lam) gives the residual (and outputs, see ``newton``) with every load scaled by lam. The
-    ramps of ``stages`` (static) are tried in turn: K equal stages lam = 1/K, ..., 1, each started
-    from the last root, the first from lam * x_ramp (a start that is linear in the loads, e.g. the
-    straight rod), or from x0 when K is the first ramp's 1. ``solve(F_at(lam), guess, tol,
-    max_iter)`` is ``newton`` or one with its returns; x0 may then be a pytree and x_ramp a
-    function of lam.
+    ramps of ``stages`` are tried in turn: K equal stages lam = 1/K, ..., 1, each started from the
+    last root, the first from lam * x_ramp (a start that is linear in the loads, e.g. the straight
+    rod), or from x0 when K is the first ramp's 1. ``stages`` may be traced (its length static),
+    and ``count`` (default all; may be traced) says how many of them to try. ``solve(F_at(lam),
+    guess, tol, max_iter)`` is ``newton`` or one with its returns; x0 may then be a pytree and
+    x_ramp a function of lam.
     """
     ramps = jnp.asarray(stages, jnp.int32)
+    count = len(stages) if count is None else count
     if solve is newton:
         shapes = _jacobian_shapes(lambda x: F_at(1.0)(x), x0)  # F_at's own work traced inside too
     else:
@@ -166,13 +168,21 @@ def continuation(F_at, x0, x_ramp, tol, max_iter, stages=(1, 4, 16), solve=newto
         ok = code == status.SUCCESS
         ramp_next = jnp.where(ok, ramp, ramp + 1)
         stage_next = jnp.where(ok, stage + 1, 1)
-        done = (ok & (stage == K)) | (ramp_next == len(stages))
+        done = (ok & (stage == K)) | (ramp_next == count)
         return x_new, r_new, it + it_new, J_new, jnp.where(done, ramp, ramp_next), stage_next, done, code
 
     init = (x0, jnp.full(r0.size, jnp.inf), jnp.zeros((), jnp.int32), J0, 0, 1, False, status.SUCCESS)
     x, r, it, J, ramp, _, _, code = lax.while_loop(not_done, body, init)
     code = jnp.where(code == _STALLED, status.CONTINUATION_EXHAUSTED, code).astype(jnp.int32)
     return Root(x, r, J, it, ramps[ramp], code)
+
+
+def unset_root(F, x0) -> Root:
+    """A Root of zeros at x0 shaped like ``continuation``'s (with ``newton``) for F: a loop's
+    state before its first root, from one trace of F."""
+    r, J = jax.tree.map(lambda o: jnp.zeros(o.shape, o.dtype), _jacobian_shapes(F, x0))
+    zero = jnp.zeros((), jnp.int32)
+    return Root(x0, r, J, zero, zero, zero)
 
 
 def lazily(needed, f, otherwise, *operands):

@@ -20,7 +20,7 @@ from .contact import SMOOTHING
 from .description import GeneralRobot
 from .integrate import rk4
 from .loads import Actuation, TipLoad
-from .newton import broyden, continuation, lazily
+from .newton import broyden, continuation, lazily, unset_root
 from .options import SolverOptions
 from .robot import Robot
 from .segments import E3, Segment, State, carried, paper_transition, uncarried, vector_field
@@ -188,23 +188,42 @@ def _root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: S
 
     if getattr(load, "scene", None) is None:
         found = continuation(F_at, x0, x_straight, solver.tol, solver.max_iter, solver.stages)
-        return found.x, RootInfo(found.iterations, found.stages, found.result, found.jacobians)
-    # contact: plain Newton from the contact-free start (no contact: the contact-free solve's own
-    # steps); where it fails, the smoothed complementarity, mu decreasing (contact.SMOOTHING), then
-    # the exact one, each from the last root, each with the load continuation
-    first = continuation(F_at, x0, x_straight, solver.tol, solver.max_iter, (1,))
-
-    def smoothed(x0, x_straight):
-        x, iterations = x0, first.iterations
-        for mu in SMOOTHING:
-            smooth = continuation(lambda lam, mu=mu: F_at(lam, mu), x, x_straight, solver.tol, solver.max_iter, solver.stages)
-            x = jnp.where(jnp.all(jnp.isfinite(smooth.x)), smooth.x, x)
-            iterations = iterations + smooth.iterations
-        found = continuation(F_at, x, x_straight, solver.tol, solver.max_iter, solver.stages)
-        return found._replace(iterations=iterations + found.iterations)
-
-    found = lazily(first.result != status.SUCCESS, smoothed, first, x0, x_straight)
+    else:
+        found = _contact_root(F_at, x0, x_straight, solver)
     return found.x, RootInfo(found.iterations, found.stages, found.result, found.jacobians)
+
+
+def _contact_root(F_at, x0, x_straight, solver: SolverOptions):
+    """The root with contact rows: plain Newton from the contact-free start x0 (no contact: the
+    contact-free solve's own steps); where it fails, the smoothed complementarity from x0, mu
+    decreasing (contact.SMOOTHING), then the exact one, each from the last finite root, each with
+    the load continuation. The Root of the last pass, with the Newton steps of all of them.
+
+    The passes are those of one loop, mu and the ramps its data: the compiled program holds one
+    copy of the shooting integration, not one per pass (a contact solve compiled in 3.6 s, not
+    11 s). Each pass runs behind ``lazily``'s barrier; without it the same loop took 40% longer
+    per Newton step on two cores (benchmarks/README.md, "One loop for the contact passes")."""
+    passes = len(SMOOTHING) + 2
+    mus = jnp.array((0.0, *SMOOTHING, 0.0))
+    ramps = jnp.array([(1,) * len(solver.stages)] + [solver.stages] * (passes - 1), jnp.int32)
+    counts = jnp.array((1,) + (len(solver.stages),) * (passes - 1), jnp.int32)
+
+    def one(i, x, iterations):
+        start = jnp.where(i <= 1, x0, x)
+        found = continuation(
+            lambda lam: F_at(lam, mus[i]), start, x_straight, solver.tol, solver.max_iter, ramps[i], count=counts[i]
+        )
+        x = jnp.where(jnp.all(jnp.isfinite(found.x)), found.x, start)
+        go = (i > 0) | (found.result != status.SUCCESS)
+        return x, iterations + found.iterations, found, go
+
+    def body(i, c):
+        x, iterations, found, go = c
+        return lazily(go, one, c, i, x, iterations)
+
+    init = (x0, jnp.zeros((), jnp.int32), unset_root(F_at(1.0), x0), True)
+    _, iterations, found, _ = lax.fori_loop(0, passes, body, init)
+    return found._replace(iterations=iterations)
 
 
 QUICK_TOL = 0.1
