@@ -266,20 +266,24 @@ def _root_jvp(primals, tangents):
     """Implicit differentiation: dx = -J^-1 (d residual / d inputs) d inputs, with Newton's J."""
     robot, act, load, gravity, guess, solver = primals
     x, info = _root(*primals)
-    dx = _implicit(robot, act, load, gravity, solver, x, info.jacobians[0], tangents[:4])
+    dx = _implicit(robot, act, load, gravity, solver, x, info.jacobians[0], tangents[:4], taken=True)
     return (x, info), (dx, jax.tree.map(zero_tangent, info))
 
 
-def _implicit(robot, act, load, gravity, solver, x, J, tangents):
+def _implicit(robot, act, load, gravity, solver, x, J, tangents, taken=False):
     """The tangent of the root x (Newton's d residual / dx there: J, or NaN to take it here) for
-    the inputs' tangents."""
-    J = lax.cond(
-        jnp.all(jnp.isfinite(J)),
-        lambda x, J: jacobian_at_root(robot, act, load, gravity, solver, x, J),
-        lambda x, J: jax.jacfwd(lambda x: residual(robot, act, load, gravity, solver, x))(x),
-        x,
-        J,
-    )
+    the inputs' tangents. ``taken`` (static): J is Newton's own, never NaN, so the program holds
+    no second Jacobian pass for the NaN case (under ``vmap`` both branches of a cond run)."""
+    if taken:
+        J = jacobian_at_root(robot, act, load, gravity, solver, x, J)
+    else:
+        J = lax.cond(
+            jnp.all(jnp.isfinite(J)),
+            lambda x, J: jacobian_at_root(robot, act, load, gravity, solver, x, J),
+            lambda x, J: jax.jacfwd(lambda x: residual(robot, act, load, gravity, solver, x))(x),
+            x,
+            J,
+        )
     _, dF = jax.jvp(lambda r, a, l, g: residual(r, a, l, g, solver, x), (robot, act, load, gravity), tangents)
     return -jnp.linalg.solve(J, dF)
 
