@@ -163,12 +163,15 @@ class GeneralSolution(Solution):
 
 
 def _node_quantities(back: Segment, sil: Segment, y: State, in_backbone):
-    """Strains v, u and rod force n, m at one node, by the segment the node belongs to."""
+    """Strains v, u and rod force n, m at one node, by the segment the node belongs to (its
+    numbers chosen first where both segments share the tendon model: one constitutive solve)."""
 
     def with_segment(seg):
         v, u = strains(seg, y.R, y.N, y.M)
         return (v, u, *rod_force(seg, y, v, u))
 
+    if back.tilt == sil.tilt:
+        return with_segment(jax.tree.map(lambda a, b: jnp.where(in_backbone, a, b), back, sil))
     return jax.tree.map(lambda a, b: jnp.where(in_backbone, a, b), with_segment(back), with_segment(sil))
 
 
