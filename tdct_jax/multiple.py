@@ -304,12 +304,17 @@ def coarse(robot, act, load, gravity, solver, x, F_c) -> Unknowns:
     return Unknowns(x, R, ys.N / F_c, ys.M / (F_c * L))
 
 
-@jax.custom_jvp
 def root(robot, act, load, gravity, guess, solver):
     """``shooting.root`` by multiple shooting: the Unknowns at the root, and RootInfo (its
     Jacobians single shooting's, by ``jacobians``). Newton starts from ``guess`` (as
     ``shooting.root``) or the straight rod, the interiors from ``coarse``; each load stage of the
     continuation from the straight rod at that stage."""
+    return _root(robot, act, load, gravity, guess, solver)[:2]
+
+
+@jax.custom_jvp
+def _root(robot, act, load, gravity, guess, solver):
+    """``root``, and Newton's Blocks at the root, for its derivatives."""
     check(robot, load, solver)
     F_c = shooting.force_scale(robot, act, load, gravity)
     x0, x_straight = shooting.starts(robot, act, load, gravity, guess, F_c)
@@ -326,23 +331,24 @@ def root(robot, act, load, gravity, guess, solver):
 
     u0 = coarse(robot, act, load, gravity, solver, x0, F_c)
     found = continuation(F_at, u0, ramp, solver.tol, solver.max_iter, solver.stages, solve)
-    return found.x, shooting.RootInfo(found.iterations, found.stages, found.result, jacobians(found.jacobians))
+    info = shooting.RootInfo(found.iterations, found.stages, found.result, jacobians(found.jacobians))
+    return found.x, info, found.jacobians
 
 
-@root.defjvp
+@_root.defjvp
 def _root_jvp(primals, tangents):
     """Implicit differentiation: the continuity and closing residuals' input tangents condensed
-    along the intervals as in ``_step``, one (6 + n_d) solve for dx, then the interiors'."""
+    along the intervals as in ``_step`` with Newton's own Blocks at the root (no Jacobian pass of
+    its own), one (6 + n_d) solve for dx, then the interiors'."""
     robot, act, load, gravity, guess, solver = primals
-    u, info = root(*primals)
+    u, info, blocks = _root(*primals)
     F_c = shooting.force_scale(robot, act, load, gravity)
-    _, blocks = linearize(robot, act, load, gravity, solver, u, F_c)
     _, dr = jax.jvp(lambda r, a, l, g: evaluate(r, a, l, g, solver, u, F_c)[0], primals[:4], tangents[:4])
     J, rhs, a, B = _reduce(blocks, dr)
     dx = -jnp.linalg.solve(J, rhs)
     d = a[1:] + B[1:] @ dx
     du = Unknowns(dx, hat(d[:, :3]) @ u.R, d[:, 3:6], d[:, 6:N_START])
-    return (u, info), (du, jax.tree.map(shooting.zero_tangent, info))
+    return (u, info, blocks), (du, *jax.tree.map(shooting.zero_tangent, (info, blocks)))
 
 
 def path(robot, act, load, gravity, solver, u: Unknowns):
