@@ -87,6 +87,11 @@ class Rig:
             pretension=as_array("Rig.pretension", pretension, (n,) if is_concrete(pretension) else None, unit=" N"),
             rotation=as_array("Rig.rotation", self.rotation, (3,) if is_concrete(self.rotation) else None, unit=" rad"),
             translation=as_array("Rig.translation", self.translation, (3,) if is_concrete(self.translation) else None, unit=" m"),
+            # float64 arrays however given (a Python float is weakly typed): one compiled program
+            **{
+                name: as_array(f"Rig.{name}", getattr(self, name), () if is_concrete(getattr(self, name)) else None, unit=unit)
+                for name, unit in (("scale", ""), ("gravity_azimuth", " rad"), ("gravity_elevation", " rad"), ("g", " m/s^2"))
+            },
         )
         check_range("Rig.pretension", self.pretension, 0.0, unit=" N")
         check_range("Rig.scale", self.scale, 0.0, lo_open=True)

@@ -115,6 +115,14 @@ def test_pretension_holds_the_straight_robot(lab):
     np.testing.assert_allclose(np.asarray(unknowns)[0, 6:], np.repeat(tau, 3), rtol=1e-8)
 
 
+def test_a_rig_from_a_file_and_one_set_in_python_run_one_program(lab):
+    """Python floats and numpy scalars become the same leaves (float64, not weakly typed), so the
+    fixture's rig and the file's, as the command line reads it, share their compiled programs."""
+    rig = rigs.Rig.from_toml(DATA / "robot.toml")
+    assert [jax.typeof(x) for x in jax.tree.leaves(rig)] == [jax.typeof(x) for x in jax.tree.leaves(lab)]
+    assert jax.typeof(lab.g) == jax.typeof(np.float64(0.0))
+
+
 def test_names_values_and_errors(lab):
     assert rigs.value(lab, "pretension[0-2]") == pytest.approx(7.3149)
     moved = rigs.replace(lab, {"pretension[3-5]": 2.0, "rotation[2]": 0.1, "scale": 1.1, "tendons[0-2].stiffness": 250.0})
