@@ -3,6 +3,7 @@ implicit derivatives of the answer, and the compiled solve with the result's num
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from typing import NamedTuple
 
@@ -20,7 +21,7 @@ from .evaluation import evaluate, evaluate_at
 from .objectives import objective_value
 from .optimise import SQPState, sqp_start, sqp_step
 from .problem import IKResult, Plan, Problem, _wrench, actuation_of, pose_errors
-from .reach import Model, Reach, _usable, _where, no_model, reach_augmented, reach_nested, refreshed
+from .reach import START_TOL, Model, Reach, _usable, _where, no_model, reach_augmented, reach_nested, refreshed
 from .starts import STARTS, nearest_on_grid, starts
 
 
@@ -116,7 +117,11 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
         # a warm update's wrench0 is the converged solve at v0
         skip = warm & (k == 0) & reaching
         solving = (reaching & ~skip) | (phase == CLOSE) | (optimising & shared)
-        x, info = lazily(solving, lambda problem, guess: root(*problem, guess, prob.solver), (c.x, c.info), problem, guess)
+        # phase 1 converges the boundary residual along with the task: a start's forward solve
+        # need only come near it (START_TOL)
+        tol = jnp.where(reaching, jnp.maximum(START_TOL, prob.solver.tol), prob.solver.tol)
+        solver = dataclasses.replace(prob.solver, tol=tol)
+        x, info = lazily(solving, lambda problem, guess: root(*problem, guess, solver), (c.x, c.info), problem, guess)
         wrench = jnp.where(skip, wrench0, unscaled(prob.robot, x, force_scale(*problem)))
         code = jnp.where(skip, status.SUCCESS, info.result).astype(jnp.int32)
 
