@@ -11,6 +11,7 @@ import warnings
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from .tree import set_fields
@@ -21,6 +22,12 @@ def is_concrete(x) -> bool:
     if isinstance(x, jax.core.Tracer):
         return False
     return isinstance(x, (numbers.Number, str, list, tuple, np.ndarray, np.generic, jax.Array))
+
+
+def array_module(*values):
+    """numpy where every value is concrete (building an array from them then costs no JAX dispatch
+    per operation), else jax.numpy (some are traced)."""
+    return np if all(is_concrete(v) for v in values) else jnp
 
 
 def as_array(name: str, x, shape: tuple[int, ...] | None = None, *, trailing: tuple[int, ...] | None = None, unit: str = ""):

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import general
-from ..checks import UnitWarning, as_array, check_choice, check_range, is_concrete, target_note, warn_user
+from ..checks import UnitWarning, array_module, as_array, check_choice, check_range, is_concrete, target_note, warn_user
 from ..description import GeneralRobot
 from ..inputs import GeneralActuation, Loads
 from ..loads import Actuation, TipLoad, gravity_vector
@@ -116,7 +116,7 @@ def _problem(
             f"of a robot with {n_tubes} tube(s)"
         )
     if direction is not None:
-        direction = direction / jnp.linalg.norm(direction)
+        direction = direction / array_module(direction).linalg.norm(direction)
     preferred = 0.5 * L if preferred_insertion is None else preferred_insertion
     if preferred_insertion is not None and is_concrete(preferred):
         check_range("PreferredInsertion.depth", preferred, 0.0, float(L), unit=" m")
@@ -139,20 +139,21 @@ def _problem(
             "(Target(..., axes=...))"
         )
     plan = Plan(tuple(t - 1 for t in tendons), tubes, objective, ik.method)
-    scale = jnp.maximum(jnp.asarray(bounds.tension[1]), 1.0)
+    # numpy where the numbers are concrete: a JAX operation here costs a dispatch on every call
+    scale = array_module(bounds.tension).maximum(bounds.tension[1], 1.0)
     lo, hi = _input_bounds(robot, base, plan, bounds, ins_bounds, scale)
     prob = Problem(
         robot=robot,
         target=target,
         load=load,
-        gravity=jnp.asarray(gravity_vector(gravity)),
+        gravity=gravity_vector(gravity),
         base=base,
         lo=lo,
         hi=hi,
         tension_scale=scale,
         solver=solver,
-        preferred_insertion=jnp.asarray(preferred, float),
-        direction=jnp.full(3, jnp.nan) if direction is None else jnp.asarray(direction, float),
+        preferred_insertion=array_module(preferred).asarray(preferred, float),
+        direction=np.full(3, np.nan) if direction is None else array_module(direction).asarray(direction, float),
         options=ik,
     )
     if guess is None:
@@ -160,7 +161,7 @@ def _problem(
     else:
         start = jnp.clip(scaled_inputs(base, prob, plan), prob.lo, prob.hi)
         start = jnp.broadcast_to(start, (len(target.position),) + start.shape) if batched else start
-    return prob, plan, start, jnp.full(6 + len(getattr(base, "driven", ())), jnp.nan)
+    return prob, plan, start, np.full(6 + len(getattr(base, "driven", ())), np.nan)
 
 
 @functools.partial(jax.jit, static_argnames=("plan",))
@@ -210,7 +211,7 @@ def _input_bounds(robot, base, plan: Plan, bounds: Bounds, ins_bounds, scale):
     """Bounds (lo, hi) of v: tensions over ``scale`` (each capped by its tendon's ``max_tension``
     on a GeneralRobot), displacements over DISPLACEMENT_SCALE L, insertions over L."""
     L, k = robot.length, len(plan.tendons)
-    lo, hi = jnp.full(k, bounds.tension[0]) / scale, jnp.full(k, bounds.tension[1]) / scale
+    lo, hi = [bounds.tension[0] / scale] * k, [bounds.tension[1] / scale] * k
     if isinstance(robot, GeneralRobot):
         pulled, moved, _ = _split(base, plan)
         for j in pulled:
@@ -223,12 +224,13 @@ def _input_bounds(robot, base, plan: Plan, bounds: Bounds, ins_bounds, scale):
                     f"tendons[{i}].max_tension = {float(cap):g} N is below bounds.tension's lowest "
                     f"{float(bounds.tension[0]):g} N: lower bounds.tension or free another tendon"
                 )
-            hi = hi.at[j].set(jnp.minimum(bounds.tension[1], cap) / scale)
+            hi[j] = array_module(cap, bounds.tension).minimum(bounds.tension[1], cap) / scale
         if moved:
             width = DISPLACEMENT_SCALE * L
             d_lo, d_hi = (-width, width) if bounds.displacement is None else bounds.displacement
-            lo, hi = lo.at[np.array(moved)].set(d_lo / width), hi.at[np.array(moved)].set(d_hi / width)
+            for j in moved:
+                lo[j], hi[j] = d_lo / width, d_hi / width
     n = len(plan.tubes)
-    lo = jnp.concatenate([lo, jnp.full(n, ins_bounds[0] / L)])
-    hi = jnp.concatenate([hi, jnp.full(n, ins_bounds[1] / L)])
-    return lo, hi
+    lo, hi = lo + [ins_bounds[0] / L] * n, hi + [ins_bounds[1] / L] * n
+    xp = array_module(*lo, *hi)
+    return tuple(xp.stack([xp.asarray(b, float) for b in side]) for side in (lo, hi))
