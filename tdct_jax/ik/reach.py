@@ -225,8 +225,9 @@ def reach_augmented(v0, wrench0, prob: Problem, plan: Plan, model: Model | None 
     """Phase 1 on the shooting unknowns x and the inputs v together: each step is Newton on the
     tip boundary residual r(x, v) = 0 with Gauss-Newton on e for v, from one forward-mode
     Jacobian pass of (r, e) in (x, v); x is eliminated, so the bounded step is taken in v alone.
-    ``wrench0`` must be the converged base wrench at v0. The loop's first pass linearises at the
-    start, so the Jacobian pass is compiled once.
+    ``wrench0`` is the base wrench at v0, converged or near it (START_TOL): the steps converge the
+    boundary residual too. The loop's first pass linearises at the start, so the Jacobian pass is
+    compiled once.
 
     With a usable ``model`` (the last update's, at v0) a warm update: its first step from that
     model (the first-order predictor of the answer, damping MU_WARM), then chord steps, each one
