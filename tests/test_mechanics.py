@@ -42,19 +42,22 @@ def test_autodiff_compliance_matches_central_differences_when_bent(robot):
 
 
 @pytest.mark.slow
-def test_compliance_is_differentiable_in_the_insertion(robot):
+def test_compliance_is_differentiable_in_the_insertion_and_a_tension(robot):
     """The compliance comes from Newton's Jacobians at the root; its own derivative must still be
-    the derivative (not the zero tangent of a by-product): against central differences."""
+    the derivative (not the zero tangent of a by-product): against central differences. In
+    (tension 1, insertion), as tests/test_ik_optimality.py differentiates it: one program."""
     load = tdct.TipLoad.from_mass(0.02)
 
-    def CM(d):
-        return tdct.compliance(robot, tdct.Actuation((8.0, 0.0, 0.0, 0.0), d), load, throw=False)
+    def CM(w):  # w = (tension 1 [N], insertion [m])
+        return tdct.compliance(robot, tdct.Actuation(jax.numpy.stack([w[0], 0.0, 0.0, 0.0]), w[1]), load, throw=False)
 
-    dCM = np.asarray(jax.jacfwd(CM)(0.08))
-    h = 1e-6
-    fd = (np.asarray(CM(0.08 + h)) - np.asarray(CM(0.08 - h))) / (2 * h)
-    assert np.abs(dCM).max() > 0.1  # m/N per m: the tube stiffens the robot
-    assert rel_err(dCM, fd) < 1e-6
+    w = np.array([8.0, 0.08])
+    dCM = np.asarray(jax.jacfwd(CM)(w))
+    for i, h in enumerate((1e-4, 1e-6)):
+        step = h * np.eye(2)[i]
+        fd = (np.asarray(CM(w + step)) - np.asarray(CM(w - step))) / (2 * h)
+        assert rel_err(dCM[..., i], fd) < 1e-6
+    assert np.abs(dCM[..., 1]).max() > 0.1  # m/N per m: the tube stiffens the robot
 
 
 @pytest.mark.parametrize("d", [1e-4, 0.08, 0.16 - 1e-4])
