@@ -42,7 +42,7 @@ START_TOL = 1e-3
 tolerance, if looser): phase 1 converges the boundary residual along with the task (its answer's
 residual is held to the solver's tolerance), so Newton's last quadratic steps at the start are
 phase 1's first steps' work. A cold IK (benchmarks/ik.py's target) took 14.2 ms with the start
-converged to 1e-10, 12.2-12.8 ms with 1e-3 (11.6-11.8 with 1e-2, but 8% more phase-1 steps over 24
+converged to 1e-10, 12.2-12.8 ms with 1e-3 (11.5-11.8 with 1e-2, but 8% more phase-1 steps over 24
 random targets against 3%)."""
 
 STALLED = 1e-10
