@@ -35,7 +35,7 @@ class Root(NamedTuple):
     result: jax.Array
 
 
-def newton(F, x0, tol, max_iter):
+def newton(F, x0, tol, max_iter, fixed=None):
     """Levenberg-Marquardt-damped Newton on F(x)[0] = 0 with exact ``jax.jacfwd`` Jacobians.
 
     F returns (residual, outputs); Newton also carries the Jacobian of the outputs, taken in the
@@ -45,31 +45,38 @@ def newton(F, x0, tol, max_iter):
     x0 itself, so the Jacobian code appears once in the compiled loop and the last Jacobians are
     at the returned point.
 
+    ``fixed``: an array of inputs that F also takes, F(x, fixed), held fixed. The Jacobians are
+    then in (x, fixed), x's columns first, and come with F's outputs at x: (Jacobians, outputs).
+    One pass then gives the derivatives in those inputs along with the root's.
+
     Returns:
         (x, residual, jacobians, Newton steps taken, code): SUCCESS, NEWTON_LIMIT, NONFINITE or
         a stall.
     """
+    n = x0.size
 
     def linearize(x):
-        def fr(x):
-            out = F(x)
-            return out, out[0]
+        def fr(z):
+            out = F(z) if fixed is None else F(z[:n], z[n:])
+            return out, out
 
-        J, r = jax.jacfwd(fr, has_aux=True)(x)
-        return r, J
+        J, out = jax.jacfwd(fr, has_aux=True)(x if fixed is None else jnp.concatenate([x, fixed]))
+        return out[0], J if fixed is None else (J, out[1])
 
     def step(x, r, J, mu):
-        J_r = J[0]
-        return x - jnp.linalg.solve(J_r.T @ J_r + mu * jnp.eye(x.size), J_r.T @ r)
+        J_r = (J if fixed is None else J[0])[0][:, :n]
+        return x - jnp.linalg.solve(J_r.T @ J_r + mu * jnp.eye(n), J_r.T @ r)
 
-    return damped(linearize, step, x0, tol, max_iter, _jacobian_shapes(F, x0))
+    return damped(linearize, step, x0, tol, max_iter, _jacobian_shapes(F, x0, fixed))
 
 
-def _jacobian_shapes(F, x):
+def _jacobian_shapes(F, x, fixed=None):
     """The shapes of ``newton``'s (residual, J) from one primal trace of F (J of a flat x: each
-    output's shape followed by x's), rather than a trace of its Jacobian pass."""
-    out = jax.eval_shape(F, x)
-    return out[0], jax.tree.map(lambda o: jax.ShapeDtypeStruct(o.shape + x.shape, o.dtype), out)
+    output's shape followed by x's, and ``fixed``'s), rather than a trace of its Jacobian pass."""
+    out = jax.eval_shape(F, x) if fixed is None else jax.eval_shape(F, x, fixed)
+    k = 0 if fixed is None else fixed.size
+    J = jax.tree.map(lambda o: jax.ShapeDtypeStruct(o.shape + (x.size + k,), o.dtype), out)
+    return out[0], J if fixed is None else (J, out[1])
 
 
 def damped(linearize, step, x0, tol, max_iter, shapes=None):
@@ -135,7 +142,7 @@ def broyden(F, x0, tol, max_iter):
     return x, r, out, it, code.astype(jnp.int32)
 
 
-def continuation(F_at, x0, x_ramp, tol, max_iter, stages=(1, 4, 16), solve=newton, count=None) -> Root:
+def continuation(F_at, x0, x_ramp, tol, max_iter, stages=(1, 4, 16), solve=newton, count=None, fixed=None) -> Root:
     """Solves F_at(1)(x)[0] = 0 from x0, ramping the loads in stages when plain Newton fails.
 
     F_at(lam) gives the residual (and outputs, see ``newton``) with every load scaled by lam. The
@@ -144,12 +151,16 @@ def continuation(F_at, x0, x_ramp, tol, max_iter, stages=(1, 4, 16), solve=newto
     rod), or from x0 when K is the first ramp's 1. ``stages`` may be traced (its length static),
     and ``count`` (default all; may be traced) says how many of them to try. ``solve(F_at(lam),
     guess, tol, max_iter)`` is ``newton`` or one with its returns; x0 may then be a pytree and
-    x_ramp a function of lam.
+    x_ramp a function of lam. ``fixed``: ``newton``'s, inputs F_at(lam) also takes.
     """
     ramps = jnp.asarray(stages, jnp.int32)
     count = len(stages) if count is None else count
     if solve is newton:
-        shapes = _jacobian_shapes(lambda x: F_at(1.0)(x), x0)  # F_at's own work traced inside too
+        shapes = _jacobian_shapes(lambda *a: F_at(1.0)(*a), x0, fixed)  # F_at's own work traced inside too
+
+        def solve(F, x, tol, max_iter):
+            return newton(F, x, tol, max_iter, fixed)
+
     else:
         shapes = jax.eval_shape(lambda: solve(F_at(1.0), x0, tol, max_iter))[1:3]
     r0, J0 = jax.tree.map(lambda o: jnp.zeros(o.shape, o.dtype), shapes)

@@ -174,23 +174,41 @@ def root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: So
 @jax.custom_jvp
 def _root(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: SolverOptions):
     """``root`` by single shooting."""
+    found = _single(robot, act, load, gravity, guess, solver)
+    return found.x, RootInfo(found.iterations, found.stages, found.result, found.jacobians)
+
+
+def root_in_inputs(robot: Robot, actuation, v, load: TipLoad, gravity, guess, solver: SolverOptions):
+    """``root`` by single shooting at the actuation ``actuation(v)`` of an array of inputs v, its
+    Newton passes taken in v too (``newton``'s ``fixed``): (x, RootInfo, (Jacobians of the residual
+    and of the tip p and R in (x, v), x's columns first; p, R)) at x. A caller that needs the
+    root's derivatives in its inputs (the IK's phase 2) has them without a pass of its own. Not
+    differentiable; no scene."""
+    found = _single(robot, actuation(v), load, gravity, guess, solver, (actuation, v))
+    (J_res, (J_p, J_R)), (p, R) = found.jacobians
+    n = found.x.size
+    info = RootInfo(found.iterations, found.stages, found.result, (J_res[:, :n], (J_p[:, :n], J_R[..., :n])))
+    return found.x, info, ((J_res, J_p, J_R), p, R)
+
+
+def _single(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: SolverOptions, inputs=None):
+    """The ``newton.Root`` by single shooting; ``inputs``: (actuation, v) of ``root_in_inputs``."""
     F_c = force_scale(robot, act, load, gravity)
     x0, x_straight = starts(robot, act, load, gravity, guess, F_c, solver.steps)
 
     def F_at(lam, mu=0.0):
-        act_lam, load_lam, gravity_lam = loads_at(robot, act, load, gravity, lam)
-
-        def F(x):
+        def F(x, v=None):
+            act_lam, load_lam, gravity_lam = loads_at(robot, act if v is None else inputs[0](v), load, gravity, lam)
             res, tip = shoot(robot, act_lam, load_lam, gravity_lam, solver, x, F_c, mu=mu)
             return res, (tip.p, tip.R)
 
         return F
 
     if getattr(load, "scene", None) is None:
-        found = continuation(F_at, x0, x_straight, solver.tol, solver.max_iter, solver.stages)
-    else:
-        found = _contact_root(F_at, x0, x_straight, solver)
-    return found.x, RootInfo(found.iterations, found.stages, found.result, found.jacobians)
+        return continuation(
+            F_at, x0, x_straight, solver.tol, solver.max_iter, solver.stages, fixed=None if inputs is None else inputs[1]
+        )
+    return _contact_root(F_at, x0, x_straight, solver)
 
 
 def _contact_root(F_at, x0, x_straight, solver: SolverOptions):

@@ -15,7 +15,7 @@ from jax import lax
 from .. import status
 from ..inputs import GeneralActuation
 from ..newton import lazily
-from ..shooting import RootInfo, at_root, force_scale, root, scaled, tip_compliance, unscaled, unset_info
+from ..shooting import RootInfo, at_root, force_scale, root, root_in_inputs, scaled, tip_compliance, unscaled, unset_info
 from ..solve import solution_and_compliance, solution_at
 from .evaluation import evaluate, evaluate_at
 from .objectives import objective_value
@@ -92,6 +92,10 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
     warm = False if model is None else _usable(model)
     closing = prob.solver.intervals == 1  # multiple shooting: ``_solve_ik`` solves at the answer itself
     shared = not callable(plan.objective)  # a user's objective: phase 2 solves through the Solution
+    # phase 2 reads its task Jacobian from the forward solve's Newton pass, taken in v as well
+    # (``root_in_inputs``), not from a pass of its own: one copy of the Jacobian pass fewer in the
+    # program (the stiffness objective's second-order pass gives it anyway)
+    in_inputs = shared and plan.objective not in (None, "stiffness") and closing
 
     def reach(v, wrench, first):
         if plan.method == "nested":
@@ -121,7 +125,14 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
         # need only come near it (START_TOL)
         tol = jnp.where(reaching, jnp.maximum(START_TOL, prob.solver.tol), prob.solver.tol)
         solver = dataclasses.replace(prob.solver, tol=tol)
-        x, info = lazily(solving, lambda problem, guess: root(*problem, guess, solver), (c.x, c.info), problem, guess)
+
+        def forward(problem, v, guess):  # (x, RootInfo, and with ``in_inputs`` what ``root_in_inputs`` took)
+            if in_inputs:
+                actuation = functools.partial(actuation_of, prob=prob, plan=plan)
+                return root_in_inputs(problem[0], actuation, v, *problem[2:], guess, solver)
+            return (*root(*problem, guess, solver), ())
+
+        x, info, taken = lazily(solving, forward, (c.x, c.info, untaken), problem, v, guess)
         wrench = jnp.where(skip, wrench0, unscaled(prob.robot, x, force_scale(*problem)))
         code = jnp.where(skip, status.SUCCESS, info.result).astype(jnp.int32)
 
@@ -136,11 +147,11 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
         phase = jnp.where(reaching, after_reach(k, best), jnp.where(phase == CLOSE, DONE, phase))
         if sqp is not None:
 
-            def optimised(v, x, info, guess):
-                trial = evaluate_at(v, x, info, prob, plan) if shared else evaluate(v, guess, prob, plan)
+            def optimised(v, x, info, guess, taken):
+                trial = evaluate_at(v, x, info, prob, plan, taken or None) if shared else evaluate(v, guess, prob, plan)
                 return sqp_step(sqp, trial, prob)
 
-            sqp = lazily(optimising, optimised, sqp, v, x, info, guess)
+            sqp = lazily(optimising, optimised, sqp, v, x, info, guess, taken)
             # phase 2 starts where phase 1 reached the target
             sqp = _where(reaching & (phase == OPTIMISE), sqp_start(best.v, best.wrench, prob), sqp)
             ended = optimising & sqp.done
@@ -155,6 +166,11 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
         return lazily(c.phase != DONE, step, c, c)._replace(i=c.i + 1)
 
     n = jnp.shape(wrench0)[0]
+    if in_inputs:
+        nk = n + v0.shape[0]
+        untaken = (jnp.zeros((n, nk)), jnp.zeros((3, nk)), jnp.zeros((3, 3, nk))), jnp.zeros(3), jnp.zeros((3, 3))
+    else:
+        untaken = ()
     none = Reach(v0, jnp.full(n, jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT), cold)
     first = after_reach(first_start, none)
     sqp = None if plan.objective is None else sqp_start(v0, jnp.full(n, jnp.nan), prob)

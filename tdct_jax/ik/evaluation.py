@@ -46,24 +46,27 @@ def evaluate(v, guess, prob: Problem, plan: Plan) -> Evaluation:
     return evaluate_at(v, *root(*lax.stop_gradient(problem), guess, prob.solver), prob, plan)
 
 
-def evaluate_at(v, x, info: RootInfo, prob: Problem, plan: Plan) -> Evaluation:
+def evaluate_at(v, x, info: RootInfo, prob: Problem, plan: Plan, taken=None) -> Evaluation:
     """``evaluate`` (not for a user's objective) at the root x at v that ``root`` found elsewhere
-    (its RootInfo ``info``), e.g. by ``find``'s one forward solve."""
+    (its RootInfo ``info``), e.g. by ``find``'s one forward solve; ``taken``: the Jacobians in
+    (x, v) and the tip that ``root_in_inputs`` took with it (``_one_pass``)."""
     problem = (prob.robot, actuation_of(v, prob, plan), prob.load, prob.gravity)
     F_c = force_scale(*problem)
     # x with root's implicit derivatives, for the derivatives of this evaluation (``_find_jvp``)
     x = at_root(*problem, prob.solver, x, info.jacobians[0])
-    e, G, phi, dphi = _one_pass(x, v, F_c, prob, plan)
+    e, G, phi, dphi = _one_pass(x, v, F_c, prob, plan, taken)
     return Evaluation(e, G, phi, dphi, unscaled(prob.robot, x, F_c), info.result)
 
 
-def _one_pass(x, v, F_c, prob: Problem, plan: Plan):
+def _one_pass(x, v, F_c, prob: Problem, plan: Plan, taken=None):
     """(e, G, phi, dphi) at the root x at v from one forward-mode pass of the shooting residual r
     and the tip pose over z = (x, v), with x eliminated by the implicit function theorem:
     dz/dv = (-(dr/dx)^-1 dr/dv, I). The stiffness objective's compliance (eq. 41) comes from the
     same pass's columns in x; its derivative in v from the same pass too, taken to second order:
     d(r, tip)/dx differentiated in z, then along dz/dv (one copy of the integration in the
-    compiled program, not two)."""
+    compiled program, not two). ``taken``: ((J_r, J_p, J_R), p, R), that pass's Jacobians and
+    tip, taken already (``root_in_inputs``'s Newton pass; primal only, not with the stiffness
+    objective): no pass here."""
     n, k = x.shape[0], v.shape[0]
     stiffness = plan.objective == "stiffness"
 
@@ -76,7 +79,9 @@ def _one_pass(x, v, F_c, prob: Problem, plan: Plan):
         return out, Jx
 
     z = jnp.concatenate([x, v])
-    if stiffness:
+    if taken is not None:
+        (J_r, J_p, J_R), p, R = taken
+    elif stiffness:
         (J_z, dJx_dz), ((_, p, R), Jx) = jax.jacfwd(lambda z: (lambda o: (o, o))(in_x(z)), has_aux=True)(z)
         J_r, J_p, J_R = J_z
     else:
