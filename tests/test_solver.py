@@ -13,7 +13,7 @@ import pytest
 from conftest import rel_err
 
 import tdct_jax as tdct
-from tdct_jax import shooting
+from tdct_jax import shooting, status
 from tdct_jax.loads import gravity_vector
 from tdct_jax.newton import lazily
 
@@ -130,6 +130,38 @@ def test_rk4_steps_of_an_ik_pass_run_in_sequence_with_r_by_columns(paper_case, r
     hlo = jax.jit(jax.jacfwd(residual)).lower(z).compile().as_text()
     loops = {instruction.split(":")[0] for instruction in _large_arrays_in_loops(hlo, SEQUENTIAL_BYTES)}
     assert (len(loops) <= 1) == (rotation == "columns"), loops
+
+
+def test_root_in_inputs_is_the_root_with_its_derivatives_in_the_inputs(paper_case):
+    """``shooting.root_in_inputs`` (Newton's passes taken in the inputs too, for the IK's phase 2)
+    finds the root that ``tdct.solve`` found, and its Jacobians of the residual and the tip in the
+    inputs (tensions, insertion) equal central differences at that root."""
+    robot, act, load, sol = paper_case
+    g = gravity_vector(tdct.STANDARD_GRAVITY)
+    solver = tdct.SolverOptions()
+    v = jnp.concatenate([act.tensions, jnp.reshape(act.insertion, 1)])
+
+    def actuation(v):
+        return tdct.Actuation(v[:4], v[4])
+
+    def found(v):
+        return shooting.root_in_inputs(robot, actuation, v, load, g, jnp.full(6, jnp.nan), solver)
+
+    x, info, ((J_r, J_p, J_R), p, R) = jax.jit(found)(v)
+    F_c = shooting.force_scale(robot, act, load, g)
+    assert int(info.result) == status.SUCCESS
+    np.testing.assert_allclose(shooting.unscaled(robot, x, F_c), sol.base_wrench, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(p, sol.tip_position, rtol=0, atol=1e-10)
+
+    def tip(v):
+        res, y = shooting.shoot(robot, actuation(v), load, g, solver, x, F_c)
+        return jnp.concatenate([res, y.p, y.R.ravel()])
+
+    h = 1e-6
+    central = jax.jit(jax.vmap(lambda dv: (tip(v + dv) - tip(v - dv)) / (2 * h)))(h * jnp.eye(5)).T
+    taken = jnp.concatenate([J_r[:, 6:], J_p[:, 6:], J_R[..., 6:].reshape(9, 5)])
+    assert rel_err(taken, central) < 1e-6
+    assert info.jacobians[0].shape == (6, 6)
 
 
 def test_lazily_keeps_its_branch_inside_its_loop_under_vmap():
