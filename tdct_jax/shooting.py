@@ -353,13 +353,16 @@ def tip_compliance(robot: Robot, R_tip, J_res, J_p, J_R, F_c):
     Jacobians of the residual and of the tip pose (p, R) with respect to the scaled unknowns at
     the root: the tip load enters only the residual, d res / d(F_e, M_e) = -diag(1 / F_c, 1 / (F_c L)).
     With displacement-driven tendons the displacements are held: their tensions adjust."""
-    dres_dw = jnp.diag(jnp.repeat(jnp.stack([1 / F_c, 1 / (F_c * robot.length)]), 3))
-    # unknowns beyond the base wrench (displacement-driven tensions): their residuals hold the
-    # displacements, which the tip load does not enter
-    if J_res.shape[0] > 6:
-        dres_dw = jnp.concatenate([dres_dw, jnp.zeros((J_res.shape[0] - 6, 6))])
-    dx_dw = jnp.linalg.solve(J_res, dres_dw)
+    dx_dw = jnp.linalg.solve(J_res, load_columns(robot, J_res.shape[0], F_c))
     return jnp.concatenate([J_p @ dx_dw, rotation_columns(J_R @ dx_dw, R_tip)])
+
+
+def load_columns(robot: Robot, n: int, F_c):
+    """d residual / d(F_e, M_e) up to sign, (n, 6): diag(1 / F_c, 1 / (F_c L)) for the base
+    wrench's rows. Rows beyond the sixth (displacement-driven tensions) hold the displacements,
+    which the tip load does not enter: zero."""
+    dres_dw = jnp.diag(jnp.repeat(jnp.stack([1 / F_c, 1 / (F_c * robot.length)]), 3))
+    return jnp.concatenate([dres_dw, jnp.zeros((n - 6, 6))]) if n > 6 else dres_dw
 
 
 def compliance_at(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x):

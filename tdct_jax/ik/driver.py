@@ -94,8 +94,8 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
     shared = not callable(plan.objective)  # a user's objective: phase 2 solves through the Solution
     # phase 2 reads its task Jacobian from the forward solve's Newton pass, taken in v as well
     # (``root_in_inputs``), not from a pass of its own: one copy of the Jacobian pass fewer in the
-    # program (the stiffness objective's second-order pass gives it anyway)
-    in_inputs = shared and plan.objective not in (None, "stiffness") and closing
+    # program
+    in_inputs = shared and plan.objective is not None and closing
 
     def reach(v, wrench, first):
         if plan.method == "nested":

@@ -11,7 +11,7 @@ from jax import lax
 
 from .. import general
 from ..inputs import GeneralActuation
-from ..shooting import RootInfo, at_root, force_scale, root, scaled, shoot, tip_compliance, unscaled
+from ..shooting import RootInfo, at_root, force_scale, load_columns, root, scaled, shoot, tip_compliance, unscaled
 from ..solve import solution_and_compliance
 from .objectives import objective_value
 from .problem import Plan, Problem, _wrench, actuation_of, task_residual
@@ -61,53 +61,71 @@ def evaluate_at(v, x, info: RootInfo, prob: Problem, plan: Plan, taken=None) -> 
 def _one_pass(x, v, F_c, prob: Problem, plan: Plan, taken=None):
     """(e, G, phi, dphi) at the root x at v from one forward-mode pass of the shooting residual r
     and the tip pose over z = (x, v), with x eliminated by the implicit function theorem:
-    dz/dv = (-(dr/dx)^-1 dr/dv, I). The stiffness objective's compliance (eq. 41) comes from the
-    same pass's columns in x; its derivative in v from the same pass too, taken to second order:
-    d(r, tip)/dx differentiated in z, then along dz/dv (one copy of the integration in the
-    compiled program, not two). ``taken``: ((J_r, J_p, J_R), p, R), that pass's Jacobians and
-    tip, taken already (``root_in_inputs``'s Newton pass; primal only, not with the stiffness
-    objective): no pass here."""
+    dz/dv = (-(dr/dx)^-1 dr/dv, I). ``taken``: ((J_r, J_p, J_R), p, R), that pass's Jacobians and
+    tip, taken already (``root_in_inputs``'s Newton pass; primal only): no pass here. The
+    stiffness objective's compliance (eq. 41) comes from the pass's columns in x, its derivative
+    in v from one more pass (``_compliance_change``)."""
     n, k = x.shape[0], v.shape[0]
-    stiffness = plan.objective == "stiffness"
 
     def tip(z):
         r, y = shoot(prob.robot, actuation_of(z[n:], prob, plan), prob.load, prob.gravity, prob.solver, z[:n], F_c)
         return r, y.p, y.R
 
-    def in_x(z):  # (tip, d tip / dx) at z
-        Jx, out = jax.jacfwd(lambda x: (lambda o: (o, o))(tip(jnp.concatenate([x, z[n:]]))), has_aux=True)(z[:n])
-        return out, Jx
-
     z = jnp.concatenate([x, v])
     if taken is not None:
         (J_r, J_p, J_R), p, R = taken
-    elif stiffness:
-        (J_z, dJx_dz), ((_, p, R), Jx) = jax.jacfwd(lambda z: (lambda o: (o, o))(in_x(z)), has_aux=True)(z)
-        J_r, J_p, J_R = J_z
     else:
         (J_r, J_p, J_R), (_, p, R) = jax.jacfwd(lambda z: (lambda o: (o, o))(tip(z)), has_aux=True)(z)
     D = jnp.concatenate([-jnp.linalg.solve(J_r[:, :n], J_r[:, n:]), jnp.eye(k)])
 
-    def each(f, primals, tangents, axes):  # f's derivative along every column of the tangents
-        return jax.vmap(lambda t: jax.jvp(f, primals, t)[1], in_axes=(axes,), out_axes=-1)(tangents)
-
     def task(p, R):
         return task_residual(p, R, prob.target, prob.robot.length)
 
-    e, G = task(p, R), each(task, (p, R), (J_p @ D, J_R @ D), (1, 2))
+    e, G = task(p, R), _along(task, (p, R), (J_p @ D, J_R @ D), (1, 2))
     if plan.objective is None:
         return e, G, jnp.zeros(()), jnp.zeros(k)
+    if plan.objective == "stiffness":
+        C = tip_compliance(prob.robot, R, J_r[:, :n], J_p[:, :n], J_R[..., :n], F_c)
+        dC = jnp.zeros((6, 6, k)).at[:3, :3].set(_compliance_change(z, D, J_r[:, :n], J_p[:, :n], F_c, prob, plan))
 
-    def objective(z, R, Jx):
+        def stiffness(C):  # of the positional compliance alone
+            return objective_value(None, C, None, prob, plan)
+
+        return e, G, stiffness(C), _along(stiffness, (C,), (dC,), (2,))
+
+    def objective(z):
         act = actuation_of(z[n:], prob, plan)
         if isinstance(act, GeneralActuation):  # the driven tensions found
             act = general.with_driven(act, z[:n], F_c)
-        return objective_value(None, tip_compliance(prob.robot, R, *Jx, F_c) if stiffness else None, act, prob, plan)
+        return objective_value(None, None, act, prob, plan)
 
-    Jx, dJx = (Jx, jax.tree.map(lambda a: a @ D, dJx_dz)) if stiffness else ((), ())
-    primals = (z, R, Jx)
-    dphi = each(objective, primals, (D, J_R @ D, dJx), (1, 2, jax.tree.map(lambda _: -1, Jx)))
-    return e, G, objective(*primals), dphi
+    return e, G, objective(z), _along(objective, (z,), (D,), (1,))
+
+
+def _along(f, primals, tangents, axes):
+    """f's derivative along every column of the tangents (their axes ``axes``), last axis."""
+    return jax.vmap(lambda t: jax.jvp(f, primals, t)[1], in_axes=(axes,), out_axes=-1)(tangents)
+
+
+def _compliance_change(z, D, M, P, F_c, prob: Problem, plan: Plan):
+    """dC/dv (3, 3, k) of the positional compliance C = P U (eq. 41) at the root z = (x, v):
+    U = M^-1 B, with M = dr/dx, P = d tip p / dx and B the tip force's columns of dr/dF_e
+    (``load_columns``). Along dz/dv (D's columns) C changes by dP U - P M^-1 dM U, and (dM U, dP U)
+    come from one forward pass along D of the pass along U's three columns in x: 3 k second-order
+    directions, where the whole second-order Jacobian of (r, p) in x and z takes 6 (n + k)."""
+    n = M.shape[0]
+    U = jnp.linalg.solve(M, load_columns(prob.robot, n, F_c)[:, :3])
+
+    def along_U(z):  # (dr/dx U, dp/dx U) at z
+        def rp(x):
+            r, y = shoot(prob.robot, actuation_of(z[n:], prob, plan), prob.load, prob.gravity, prob.solver, x, F_c)
+            return r, y.p
+
+        return _along(rp, (z[:n],), (U,), (1,))
+
+    dMU, dPU = _along(along_U, (z,), (D,), (1,))  # (n, 3, k), (3, 3, k)
+    k = D.shape[1]
+    return dPU - jnp.einsum("ij,jbk->ibk", P, jnp.linalg.solve(M, dMU.reshape(n, 3 * k)).reshape(n, 3, k))
 
 
 def _through_solution(v, guess, prob: Problem, plan: Plan) -> Evaluation:
