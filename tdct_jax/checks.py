@@ -18,9 +18,12 @@ from .tree import set_fields
 
 
 def is_concrete(x) -> bool:
-    """True for values a user passed in; False for tracers (inside jit, vmap, grad) and None."""
+    """True for values a user passed in; False for tracers (inside jit, vmap, grad), sequences
+    holding one (``(tau, 0.0, 0.0, 0.0)`` with tau traced) and None."""
     if isinstance(x, jax.core.Tracer):
         return False
+    if isinstance(x, (list, tuple)):
+        return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(x))
     return isinstance(x, (numbers.Number, str, list, tuple, np.ndarray, np.generic, jax.Array))
 
 
@@ -31,7 +34,8 @@ def array_module(*values):
 
 
 def as_array(name: str, x, shape: tuple[int, ...] | None = None, *, trailing: tuple[int, ...] | None = None, unit: str = ""):
-    """A concrete number or sequence as a finite float64 numpy array; tracers pass unchanged.
+    """A concrete number or sequence as a finite float64 numpy array; tracers pass unchanged, and a
+    sequence holding tracers becomes one traced array.
 
     Args:
         name: the field, as the user knows it (for the message).
@@ -41,7 +45,7 @@ def as_array(name: str, x, shape: tuple[int, ...] | None = None, *, trailing: tu
         unit: appended to the value in messages, e.g. " m".
     """
     if not is_concrete(x):
-        return x
+        return jnp.asarray(x, dtype=jnp.float64) if isinstance(x, (list, tuple)) else x
     try:
         a = np.asarray(x, dtype=np.float64)
     except (TypeError, ValueError) as e:
