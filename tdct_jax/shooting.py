@@ -348,6 +348,30 @@ def _jacobian_at_root_jvp(primals, tangents):
     return J, jax.jvp(jacobian, (robot, act, load, gravity, x), (*tangents[:4], tangents[5]))[1]
 
 
+@jax.custom_jvp
+def jacobians_at_root(robot, act, load, gravity, solver, x, jacobians):
+    """Newton's Jacobians at x, (d residual / dx, (d tip p / dx, d tip R / dx)) as RootInfo holds
+    them, free; their own derivatives (second order) by autodiff: a compliance taken from them
+    (``tip_compliance``) is then differentiable."""
+    return jacobians
+
+
+@jacobians_at_root.defjvp
+def _jacobians_at_root_jvp(primals, tangents):
+    robot, act, load, gravity, solver, x, jacobians = primals
+
+    def taken(robot, act, load, gravity, x):
+        F_c = force_scale(robot, act, load, gravity)
+
+        def pose(x):
+            res, tip = shoot(robot, act, load, gravity, solver, x, F_c)
+            return res, (tip.p, tip.R)
+
+        return jax.jacfwd(pose)(x)
+
+    return jacobians, jax.jvp(taken, (robot, act, load, gravity, x), (*tangents[:4], tangents[5]))[1]
+
+
 def tip_compliance(robot: Robot, R_tip, J_res, J_p, J_R, F_c):
     """The 6x6 tip compliance d(tip position, tip rotation vector) / d(F_e, M_e) (eq. 41) from the
     Jacobians of the residual and of the tip pose (p, R) with respect to the scaled unknowns at

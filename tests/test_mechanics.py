@@ -8,6 +8,8 @@ import pytest
 from conftest import NO_GRAVITY, rel_err
 
 import tdct_jax as tdct
+from tdct_jax import shooting
+from tdct_jax.loads import gravity_vector
 
 BENT = (tdct.Actuation(tensions=(8.0, 0.0, 0.0, 3.0), insertion=0.05), tdct.TipLoad(force=(0.05, -0.3, 0.02)))
 
@@ -58,6 +60,35 @@ def test_compliance_is_differentiable_in_the_insertion_and_a_tension(robot):
         fd = (np.asarray(CM(w + step)) - np.asarray(CM(w - step))) / (2 * h)
         assert rel_err(dCM[..., i], fd) < 1e-6
     assert np.abs(dCM[..., 1]).max() > 0.1  # m/N per m: the tube stiffens the robot
+
+
+def test_compliance_from_newtons_jacobians_at_a_root_is_differentiable(robot):
+    """``shooting.jacobians_at_root`` (how an IK answer's stiffness objective gets its value): the
+    compliance from Newton's Jacobians at a root is tdct.compliance, and its derivative in (tension
+    1, insertion) equals central differences of tdct.compliance (the points and steps above)."""
+    load, g, solver = tdct.TipLoad.from_mass(0.02), gravity_vector(tdct.STANDARD_GRAVITY), tdct.SolverOptions()
+
+    def actuation(w):  # w = (tension 1 [N], insertion [m])
+        return tdct.Actuation(jax.numpy.stack([w[0], 0.0, 0.0, 0.0]), w[1])
+
+    def CM(w):
+        act = actuation(w)
+        x, info = shooting.root(robot, act, load, g, jax.numpy.full(6, jax.numpy.nan), solver)
+        J_res, (J_p, J_R) = shooting.jacobians_at_root(robot, act, load, g, solver, x, info.jacobians)
+        # the positional rows: the tip rotation enters only the rotation rows
+        return shooting.tip_compliance(robot, jax.numpy.eye(3), J_res, J_p, J_R, shooting.force_scale(robot, act, load, g))[
+            :3, :3
+        ]
+
+    def reference(w):
+        return np.asarray(tdct.compliance(robot, actuation(w), load, throw=False))
+
+    w = np.array([8.0, 0.08])
+    np.testing.assert_allclose(jax.jit(CM)(w), reference(w), rtol=1e-12, atol=0)
+    dCM = np.asarray(jax.jit(jax.jacfwd(CM))(w))
+    for i, h in enumerate((1e-4, 1e-6)):
+        step = h * np.eye(2)[i]
+        assert rel_err(dCM[..., i], (reference(w + step) - reference(w - step)) / (2 * h)) < 1e-6
 
 
 @pytest.mark.parametrize("d", [1e-4, 0.08, 0.16 - 1e-4])

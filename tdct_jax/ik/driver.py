@@ -15,7 +15,18 @@ from jax import lax
 from .. import status
 from ..inputs import GeneralActuation
 from ..newton import lazily
-from ..shooting import RootInfo, at_root, force_scale, root, root_in_inputs, scaled, tip_compliance, unscaled, unset_info
+from ..shooting import (
+    RootInfo,
+    at_root,
+    force_scale,
+    jacobians_at_root,
+    root,
+    root_in_inputs,
+    scaled,
+    tip_compliance,
+    unscaled,
+    unset_info,
+)
 from ..solve import solution_and_compliance, solution_at
 from .evaluation import evaluate, evaluate_at
 from .objectives import objective_value
@@ -249,8 +260,12 @@ def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, tries=(0, STARTS), mode
     if prob.solver.intervals > 1:
         sol, C = solution_and_compliance(*problem, found.wrench, prob.solver)
     else:  # the closing solve of ``find``, differentiable
-        J_res, (J_p, J_R) = found.info.jacobians
-        sol = solution_at(*problem, prob.solver, at_root(*problem, prob.solver, found.x, J_res), found.info)
+        jacobians = found.info.jacobians
+        x = at_root(*problem, prob.solver, found.x, jacobians[0])
+        sol = solution_at(*problem, prob.solver, x, found.info)
+        if plan.objective == "stiffness":  # its value differentiable too (other plans: no second-order pass)
+            jacobians = jacobians_at_root(*problem, prob.solver, x, jacobians)
+        J_res, (J_p, J_R) = jacobians
         C = tip_compliance(prob.robot, sol.tip_rotation, J_res, J_p, J_R, force_scale(*problem))
     if isinstance(act, GeneralActuation):  # the driven tendons' tensions as found
         act = GeneralActuation._rebuild(sol.tensions, act.insertions, act.displacements, act.driven)

@@ -138,9 +138,7 @@ class IKResult:
         solution: the forward Solution there (``solution.tip_position`` etc.).
         position_error: distance from the tip to the target position (over ``target.axes``) [m].
         orientation_error: angle between tip and target orientation [rad] (0 without one).
-        objective: the objective's value there (NaN without one). The stiffness objective's
-            value has no derivative of its own (it comes from the answer's Newton Jacobians):
-            differentiate ``tdct.compliance`` at ``actuation`` for one.
+        objective: the objective's value there (NaN without one).
         iterations: IK steps taken.
         chord_steps: how many of them were chord steps: a warm update's (``track``), each one
             evaluation of the model with no Jacobian pass, about a quarter of a full step's cost.
