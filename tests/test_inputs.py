@@ -76,11 +76,11 @@ def test_a_sequence_holding_a_traced_number_is_one_traced_array():
     vmap, grad) build their arrays from the traced numbers, as they do from concrete ones."""
     tensions = jax.jit(lambda t: tdct.Actuation((t, 0.0, 0.0, 0.0), 0.08).tensions)(6.0)
     np.testing.assert_array_equal(tensions, [6.0, 0.0, 0.0, 0.0])
-    batch = jax.vmap(lambda t: tdct.Actuation([t, 2 * t, 0.0, 0.0], 0.08).tensions)(np.array([1.0, 3.0]))
+    batch = jax.jit(jax.vmap(lambda t: tdct.Actuation([t, 2 * t, 0.0, 0.0], 0.08).tensions))(np.array([1.0, 3.0]))
     np.testing.assert_array_equal(batch, [[1.0, 2.0, 0.0, 0.0], [3.0, 6.0, 0.0, 0.0]])
     position = jax.jit(lambda h: tdct.Target((0.0, h, 0.0)).position)(0.03)
     np.testing.assert_array_equal(position, [0.0, 0.03, 0.0])
-    assert jax.grad(lambda h: tdct.Target((h, 2 * h, 0.0)).position @ np.array([1.0, 1.0, 0.0]))(0.5) == 3.0
+    assert jax.jit(jax.grad(lambda h: tdct.Target((h, 2 * h, 0.0)).position @ np.array([1.0, 1.0, 0.0])))(0.5) == 3.0
 
 
 def test_robot_toml(tmp_path):

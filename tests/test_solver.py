@@ -139,27 +139,29 @@ def test_root_in_inputs_is_the_root_with_its_derivatives_in_the_inputs(paper_cas
     robot, act, load, sol = paper_case
     g = gravity_vector(tdct.STANDARD_GRAVITY)
     solver = tdct.SolverOptions()
-    v = jnp.concatenate([act.tensions, jnp.reshape(act.insertion, 1)])
+    v = np.concatenate([act.tensions, [act.insertion]])
 
     def actuation(v):
         return tdct.Actuation(v[:4], v[4])
 
-    def found(v):
-        return shooting.root_in_inputs(robot, actuation, v, load, g, jnp.full(6, jnp.nan), solver)
+    @jax.jit
+    def found(v):  # one program: the root, its Jacobians in v, central differences at the root
+        x, info, ((J_r, J_p, J_R), p, R) = shooting.root_in_inputs(robot, actuation, v, load, g, jnp.full(6, jnp.nan), solver)
+        F_c = shooting.force_scale(robot, actuation(v), load, g)
 
-    x, info, ((J_r, J_p, J_R), p, R) = jax.jit(found)(v)
-    F_c = shooting.force_scale(robot, act, load, g)
+        def tip(v):
+            res, y = shooting.shoot(robot, actuation(v), load, g, solver, x, F_c)
+            return jnp.concatenate([res, y.p, y.R.ravel()])
+
+        h = 1e-6
+        central = jax.vmap(lambda dv: (tip(v + dv) - tip(v - dv)) / (2 * h))(h * jnp.eye(5)).T
+        taken = jnp.concatenate([J_r[:, 6:], J_p[:, 6:], J_R[..., 6:].reshape(9, 5)])
+        return shooting.unscaled(robot, x, F_c), p, info, taken, central
+
+    wrench, p, info, taken, central = found(v)
     assert int(info.result) == status.SUCCESS
-    np.testing.assert_allclose(shooting.unscaled(robot, x, F_c), sol.base_wrench, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(wrench, sol.base_wrench, rtol=0, atol=1e-9)
     np.testing.assert_allclose(p, sol.tip_position, rtol=0, atol=1e-10)
-
-    def tip(v):
-        res, y = shooting.shoot(robot, actuation(v), load, g, solver, x, F_c)
-        return jnp.concatenate([res, y.p, y.R.ravel()])
-
-    h = 1e-6
-    central = jax.jit(jax.vmap(lambda dv: (tip(v + dv) - tip(v - dv)) / (2 * h)))(h * jnp.eye(5)).T
-    taken = jnp.concatenate([J_r[:, 6:], J_p[:, 6:], J_R[..., 6:].reshape(9, 5)])
     assert rel_err(taken, central) < 1e-6
     assert info.jacobians[0].shape == (6, 6)
 
