@@ -293,11 +293,11 @@ def _implicit(robot, act, load, gravity, solver, x, J, tangents, taken=False):
     the inputs' tangents. ``taken`` (static): J is Newton's own, never NaN, so the program holds
     no second Jacobian pass for the NaN case (under ``vmap`` both branches of a cond run)."""
     if taken:
-        J = jacobian_at_root(robot, act, load, gravity, solver, x, J)
+        J = jacobians_at_root(robot, act, load, gravity, solver, x, J)
     else:
         J = lax.cond(
             jnp.all(jnp.isfinite(J)),
-            lambda x, J: jacobian_at_root(robot, act, load, gravity, solver, x, J),
+            lambda x, J: jacobians_at_root(robot, act, load, gravity, solver, x, J),
             lambda x, J: jax.jacfwd(lambda x: residual(robot, act, load, gravity, solver, x))(x),
             x,
             J,
@@ -333,39 +333,25 @@ def zero_tangent(x):
 
 
 @jax.custom_jvp
-def jacobian_at_root(robot, act, load, gravity, solver, x, J):
-    """J, Newton's d residual / dx at x, free; its own derivatives (second order) by autodiff."""
-    return J
-
-
-@jacobian_at_root.defjvp
-def _jacobian_at_root_jvp(primals, tangents):
-    robot, act, load, gravity, solver, x, J = primals
-
-    def jacobian(robot, act, load, gravity, x):
-        return jax.jacfwd(lambda x: residual(robot, act, load, gravity, solver, x))(x)
-
-    return J, jax.jvp(jacobian, (robot, act, load, gravity, x), (*tangents[:4], tangents[5]))[1]
-
-
-@jax.custom_jvp
 def jacobians_at_root(robot, act, load, gravity, solver, x, jacobians):
-    """Newton's Jacobians at x, (d residual / dx, (d tip p / dx, d tip R / dx)) as RootInfo holds
-    them, free; their own derivatives (second order) by autodiff: a compliance taken from them
-    (``tip_compliance``) is then differentiable."""
+    """Newton's Jacobians at x, free: d residual / dx alone, or with the tip's as RootInfo holds
+    them, (d residual / dx, (d tip p / dx, d tip R / dx)). Their own derivatives (second order) by
+    autodiff: the implicit derivatives' J, and a compliance taken from them (``tip_compliance``),
+    are differentiable."""
     return jacobians
 
 
 @jacobians_at_root.defjvp
 def _jacobians_at_root_jvp(primals, tangents):
     robot, act, load, gravity, solver, x, jacobians = primals
+    with_tip = isinstance(jacobians, tuple)
 
     def taken(robot, act, load, gravity, x):
         F_c = force_scale(robot, act, load, gravity)
 
         def pose(x):
             res, tip = shoot(robot, act, load, gravity, solver, x, F_c)
-            return res, (tip.p, tip.R)
+            return (res, (tip.p, tip.R)) if with_tip else res
 
         return jax.jacfwd(pose)(x)
 
