@@ -141,7 +141,7 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
             if in_inputs:
                 actuation = functools.partial(actuation_of, prob=prob, plan=plan)
                 return root_in_inputs(problem[0], actuation, v, *problem[2:], guess, solver)
-            return (*root(*problem, guess, solver), ())
+            return (*root(*problem, guess, solver), None)
 
         x, info, taken = lazily(solving, forward, (c.x, c.info, untaken), problem, v, guess)
         wrench = jnp.where(skip, wrench0, unscaled(prob.robot, x, force_scale(*problem)))
@@ -159,7 +159,7 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
         if sqp is not None:
 
             def optimised(v, x, info, guess, taken):
-                trial = evaluate_at(v, x, info, prob, plan, taken or None) if shared else evaluate(v, guess, prob, plan)
+                trial = evaluate_at(v, x, info, prob, plan, taken) if shared else evaluate(v, guess, prob, plan)
                 return sqp_step(sqp, trial, prob)
 
             sqp = lazily(optimising, optimised, sqp, v, x, info, guess, taken)
@@ -181,7 +181,7 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
         nk = n + v0.shape[0]
         untaken = (jnp.zeros((n, nk)), jnp.zeros((3, nk)), jnp.zeros((3, 3, nk))), jnp.zeros(3), jnp.zeros((3, 3))
     else:
-        untaken = ()
+        untaken = None
     none = Reach(v0, jnp.full(n, jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT), cold)
     first = after_reach(first_start, none)
     sqp = None if plan.objective is None else sqp_start(v0, jnp.full(n, jnp.nan), prob)
