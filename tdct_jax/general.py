@@ -40,7 +40,7 @@ from . import contact
 from .checks import check_range, is_concrete
 from .description import GeneralRobot, channelled_second_moments, is_concrete_tree, section_area
 from .inputs import GeneralActuation, Loads
-from .integrate import rk4
+from .integrate import coupled, rk4
 from .segments import E3, Segment, State, carried, rod_force, strains, strains_at, tendon_pb, uncarried
 
 
@@ -387,7 +387,7 @@ def integrate(
         end, nodes = end._replace(y=uncarried(end.y)), None if nodes is None else nodes._replace(y=uncarried(nodes.y))
         return end._replace(s=None), nodes if f is None else (nodes, starts)
 
-    return lax.scan(piece, c._replace(s=None), (ps, forces))
+    return lax.scan(piece, coupled(c._replace(s=None), ps, forces), (ps, forces))
 
 
 def by_interval(a, P: int):

@@ -11,6 +11,18 @@ def _axpy(a, x, y):
     return jax.tree.map(lambda xi, yi: yi + a * xi, x, y)
 
 
+def coupled(y, *others):
+    """y, each leaf plus 0 times the sum of every leaf of y and ``others`` (where finite): the same
+    numbers, but under ``vmap`` and ``jax.jvp`` every leaf of y is batched and has a tangent where
+    any of them has, as one step of the integration makes them (the base position and rotation are
+    constants; the vector field's parameters reach the state in the first step). A loop whose
+    carry starts so is traced once by the batching and differentiation rules, which trace its
+    body again for each carry they find batched or differentiated only after it."""
+    s = sum(jnp.sum(a) for a in jax.tree.leaves((y, others)))
+    zero = 0.0 * jnp.where(jnp.isfinite(s), s, 0.0)
+    return jax.tree.map(lambda a: a + zero, y)
+
+
 def rk4(f, y0, h, params, steps: int, project=None, path: bool = False):
     """Integrates y' = f(p, y) over consecutive pieces, piece j in ``steps`` classical RK4 steps of
     length h[j] with parameters p[j] (one compiled vector field for them all).
@@ -34,21 +46,23 @@ def rk4(f, y0, h, params, steps: int, project=None, path: bool = False):
     Returns:
         The final state, and the stacked path when ``path`` is True.
     """
-    nodes = jnp.array([0.0, 0.5, 0.5, 1.0])
+    y0 = coupled(y0, h, params)
+    after = jnp.array([0.5, 0.5, 1.0, 0.0])  # where stage j + 1 evaluates, in steps from y
     weights = jnp.array([1.0, 2.0, 2.0, 1.0]) / 6
 
     def piece(y, hp):
         h, p = hp
 
         def step(y, _):
+            # the loop carries the sum so far and the next stage's point, both starting at y: no
+            # zeros to start from, which ``vmap`` and ``jax.jvp`` would trace the stages again to
+            # find batched and differentiated (``coupled``)
             def stage(j, c):
-                incr, k = c
-                k = f(p, _axpy(nodes[j] * h, k, y))
-                return _axpy(weights[j], k, incr), k
+                total, point = c
+                k = f(p, point)
+                return _axpy(h * weights[j], k, total), _axpy(h * after[j], k, y)
 
-            zero = jax.tree.map(jnp.zeros_like, y)
-            incr, _ = lax.fori_loop(0, 4, stage, (zero, zero))
-            y = _axpy(h, incr, y)
+            y, _ = lax.fori_loop(0, 4, stage, (y, y))
             if project is not None:
                 y = project(y)
             return y, (y if path else None)

@@ -76,7 +76,10 @@ def test_first_pass_shapes_and_compliance_match_the_full_solver(robot, envelope,
 def test_continuation_stages_are_solver_options(robot):
     act, load = tdct.Actuation((6.0, 0, 0, 0), 0.08), tdct.TipLoad.from_mass(0.02)
     one_ramp = tdct.solve(robot, act, load, solver=tdct.SolverOptions(tol=1e-18, stages=(1, 2)), throw=False)
-    assert int(one_ramp.stages) == 2 and int(one_ramp.result) == tdct.status.CONTINUATION_EXHAUSTED
+    # every ramp tried, and failed: at a tolerance under round-off, the last Newton's stall or its
+    # step limit comes first as the last bits of the residual fall
+    failed = (tdct.status.CONTINUATION_EXHAUSTED, tdct.status.NEWTON_LIMIT)
+    assert int(one_ramp.stages) == 2 and int(one_ramp.result) in failed
     for bad in ((), (0, 4), (4, 1), (1.5,), "1,4"):
         with pytest.raises(ValueError, match="stages"):
             tdct.SolverOptions(stages=bad)

@@ -121,7 +121,9 @@ def _compliance_change(z, D, M, P, F_c, prob: Problem, plan: Plan):
             r, y = shoot(prob.robot, actuation_of(z[n:], prob, plan), prob.load, prob.gravity, prob.solver, x, F_c)
             return r, y.p
 
-        return _along(rp, (z[:n],), (U,), (1,))
+        # U plus 0 times z: the second-order tangents start batched along D and nonzero, as one
+        # step makes them (``integrate.coupled``)
+        return _along(rp, (z[:n],), (U + 0.0 * jnp.sum(z),), (1,))
 
     dMU, dPU = _along(along_U, (z,), (D,), (1,))  # (n, 3, k), (3, 3, k)
     k = D.shape[1]
