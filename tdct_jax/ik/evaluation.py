@@ -11,6 +11,7 @@ from jax import lax
 
 from .. import general
 from ..inputs import GeneralActuation
+from ..integrate import coupled
 from ..shooting import RootInfo, at_root, force_scale, load_columns, root, scaled, shoot, tip_compliance, unscaled
 from ..solve import solution_and_compliance
 from .objectives import objective_value
@@ -121,9 +122,9 @@ def _compliance_change(z, D, M, P, F_c, prob: Problem, plan: Plan):
             r, y = shoot(prob.robot, actuation_of(z[n:], prob, plan), prob.load, prob.gravity, prob.solver, x, F_c)
             return r, y.p
 
-        # U plus 0 times z: the second-order tangents start batched along D and nonzero, as one
-        # step makes them (``integrate.coupled``)
-        return _along(rp, (z[:n],), (U + 0.0 * jnp.sum(z),), (1,))
+        # U coupled to z: the second-order tangents start batched along D and nonzero, as one
+        # step makes them
+        return _along(rp, (z[:n],), (coupled(U, z),), (1,))
 
     dMU, dPU = _along(along_U, (z,), (D,), (1,))  # (n, 3, k), (3, 3, k)
     k = D.shape[1]
