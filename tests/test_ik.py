@@ -61,9 +61,10 @@ def tendon_1_tips(robot):
     return tdct.sweep(robot, grid=grid, progress=False).tip_position
 
 
+@pytest.mark.parametrize("method", ["augmented", "nested"])
 @pytest.mark.parametrize("position", [(0.0, 0.0, 0.20), (0.0, 0.03, -0.03)], ids=["beyond the length", "behind the base"])
-def test_unreachable_targets_return_the_nearest_pose_a_brute_force_search_finds(robot, position, tendon_1_tips):
-    result = tdct.inverse_kinematics(robot, tdct.Target(position), tendons=(1,))
+def test_unreachable_targets_return_the_nearest_pose_a_brute_force_search_finds(robot, position, method, tendon_1_tips):
+    result = tdct.inverse_kinematics(robot, tdct.Target(position), tendons=(1,), ik=tdct.IKOptions(method=method))
     assert int(result.result) == tdct.status.UNREACHABLE
     brute = np.linalg.norm(tendon_1_tips - np.asarray(position), axis=-1).min()
     print(f"nearest distance: IK {1e3 * float(result.position_error):.4f} mm, brute force {1e3 * brute:.4f} mm")

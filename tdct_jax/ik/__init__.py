@@ -8,10 +8,11 @@ d / L) and kept inside their bounds exactly. Two phases:
    and optionally the orientation error). Each step solves a small box-constrained least-squares
    problem exactly by enumerating the active sets (3^n of them for n <= 5 free inputs), so
    active bounds are handled exactly, not by clipping. Two ways to evaluate a step: "augmented"
-   (the default) iterates the shooting unknowns x and the inputs v together, Newton on the tip
-   boundary residual r(x, v) = 0 and Gauss-Newton on e, one forward-mode Jacobian pass of
-   (r, e) per step; "nested" runs a converged forward solve at every step and differentiates
-   it implicitly.
+   (the default, except with the stiffness objective) iterates the shooting unknowns x and the
+   inputs v together, Newton on the tip boundary residual r(x, v) = 0 and Gauss-Newton on e, one
+   forward-mode Jacobian pass of (r, e) per step; "nested" runs a converged forward solve at
+   every step and differentiates it implicitly, through the forward solve that phase 2 uses too
+   (no Jacobian pass of its own in the compiled program).
 2. Optimise (with an objective, once reached): sequential quadratic programming on
    min phi(v) subject to e(v) = 0 and the bounds, with phi's exact gradient (forward-mode
    autodiff through the implicitly differentiated solve and compliance), a damped BFGS

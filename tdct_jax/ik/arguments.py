@@ -138,7 +138,8 @@ def _problem(
             "than task coordinates: free more tendons (tendons=), leave the insertion free, or give fewer target axes "
             "(Target(..., axes=...))"
         )
-    plan = Plan(tuple(t - 1 for t in tendons), tubes, objective, ik.method)
+    method = ik.method or ("nested" if objective == "stiffness" else "augmented")
+    plan = Plan(tuple(t - 1 for t in tendons), tubes, objective, method)
     # numpy where the numbers are concrete: a JAX operation here costs a dispatch on every call
     scale = array_module(bounds.tension).maximum(bounds.tension[1], 1.0)
     lo, hi = _input_bounds(robot, base, plan, bounds, ins_bounds, scale)

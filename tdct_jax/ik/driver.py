@@ -32,7 +32,19 @@ from .evaluation import evaluate, evaluate_at
 from .objectives import objective_value
 from .optimise import SQPState, sqp_start, sqp_step
 from .problem import IKResult, Plan, Problem, _wrench, actuation_of, pose_errors
-from .reach import START_TOL, Model, Reach, _usable, _where, no_model, reach_augmented, reach_nested, refreshed
+from .reach import (
+    START_TOL,
+    Model,
+    NestedState,
+    Reach,
+    _usable,
+    _where,
+    nested_start,
+    nested_step,
+    no_model,
+    reach_augmented,
+    refreshed,
+)
 from .starts import STARTS, nearest_on_grid, starts
 
 
@@ -68,14 +80,14 @@ def rank(code):
 
 
 REACH, OPTIMISE, CLOSE, DONE = range(4)
-"""``find``'s passes: phase 1 from one start, a step of phase 2 (with an objective), the closing
-forward solve at the answer, and the end."""
+"""``find``'s passes: phase 1 from one start (nested: a step of it), a step of phase 2 (with an
+objective), the closing forward solve at the answer, and the end."""
 
 
 class Tried(NamedTuple):
     """``find``'s loop: its pass (REACH ...), how many starts were tried, the best end so far, the
-    steps taken over all of them, the last forward solve (scaled unknowns, RootInfo) and phase 2's
-    state (None without an objective)."""
+    steps taken over all of them, the last forward solve (scaled unknowns, RootInfo), phase 2's
+    state (None without an objective) and nested phase 1's."""
 
     phase: jax.Array
     k: jax.Array
@@ -84,6 +96,7 @@ class Tried(NamedTuple):
     x: jax.Array
     info: RootInfo
     sqp: SQPState | None
+    nested: NestedState | None  # nested phase 1's state (None: augmented)
     i: jax.Array  # passes so far
 
 
@@ -92,26 +105,27 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
     """The IK solution in scaled inputs (see the module docstring), from v0 (and the converged or
     NaN base wrench there; with a usable ``model`` at v0, a warm update from it; None: no warm
     update compiled), then from the grid start (``nearest_on_grid``) and ``starts`` until one
-    reaches (the nearest pose of them all otherwise), then phase 2 a step a pass, then the
-    forward solve at the answer unless phase 1 reached at a converged one: one loop whose passes
-    share one forward solve in the compiled program. ``tries`` = (first, stop): the starts tried
-    are first, ..., stop - 1 in that order (0 is v0, 1 the grid start, then ``starts``' others).
-    Its derivatives by implicit differentiation (``_find_jvp``)."""
+    reaches (the nearest pose of them all otherwise; nested phase 1 a step a pass), then phase 2 a
+    step a pass, then the forward solve at the answer unless phase 1 reached at a converged one:
+    one loop whose passes share one forward solve in the compiled program. ``tries`` = (first,
+    stop): the starts tried are first, ..., stop - 1 in that order (0 is v0, 1 the grid start, then
+    ``starts``' others). Its derivatives by implicit differentiation (``_find_jvp``)."""
     first_start, n_starts = tries
     candidates = starts(v0, prob, plan)
     cold = no_model(prob, plan)
-    warm = False if model is None else _usable(model)
+    nested = plan.method == "nested"  # phase 1 a step a pass, through this loop's forward solve
+    warm = False if model is None or nested else _usable(model)
     closing = prob.solver.intervals == 1  # multiple shooting: ``_solve_ik`` solves at the answer itself
     shared = not callable(plan.objective)  # a user's objective: phase 2 solves through the Solution
-    # phase 2 reads its task Jacobian from the forward solve's Newton pass, taken in v as well
-    # (``root_in_inputs``), not from a pass of its own: one copy of the Jacobian pass fewer in the
-    # program
-    in_inputs = shared and plan.objective is not None and closing
+    # phase 2 (and nested phase 1) read their task Jacobian from the forward solve's Newton pass,
+    # taken in v as well (``root_in_inputs``), not from a pass of their own: one copy of the
+    # Jacobian pass fewer in the program
+    in_inputs = closing and (nested or (shared and plan.objective is not None))
+    bare = plan._replace(objective=None)  # phase 1 evaluates the task alone
 
-    def reach(v, wrench, first):
-        if plan.method == "nested":
-            return reach_nested(v, wrench, prob, plan)._replace(model=cold)
-        return reach_augmented(v, wrench, prob, plan, None if model is None else _where(first, model, cold))
+    def kept(r, best):  # the nearer of a start's end and the best so far
+        closer = (rank(r.code) < rank(best.code)) | ((rank(r.code) == rank(best.code)) & (r.e @ r.e < best.e @ best.e))
+        return jax.tree.map(lambda a, b: jnp.where(closer, a, b), r, best)
 
     def after_reach(k, best):
         more = (k < n_starts) & (best.code != status.SUCCESS)
@@ -120,11 +134,15 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
         return jnp.where(more, REACH, jnp.where(best.code == status.SUCCESS, ends, CLOSE))
 
     def step(c):
-        phase, k, best, sqp = c.phase, c.k, c.best, c.sqp
+        phase, k, best, sqp, ns = c.phase, c.k, c.best, c.sqp, c.nested
         reaching, optimising = phase == REACH, phase == OPTIMISE
-        grid = lazily(reaching & (k == 1), lambda prob: nearest_on_grid(prob, plan), v0, prob)
+        fresh = reaching if ns is None else reaching & (ns.it == 0)  # this pass begins start k
+        grid = lazily(fresh & (k == 1), lambda prob: nearest_on_grid(prob, plan), v0, prob)
         v = jnp.where(k == 1, grid, candidates[jnp.clip(k - 1, 0, len(candidates) - 1)])
         guess = jnp.where(k == 0, wrench0, jnp.nan)
+        if ns is not None:  # nested phase 1's trial point
+            ns = _where(fresh, nested_start(v, guess, prob), ns)
+            v, guess = jnp.where(reaching, ns.v + ns.s, v), jnp.where(reaching, ns.ev.wrench, guess)
         if sqp is not None:  # phase 2's trial point
             v, guess = jnp.where(optimising, sqp.v + sqp.s, v), jnp.where(optimising, sqp.ev.wrench, guess)
         v, guess = jnp.where(phase == CLOSE, best.v, v), jnp.where(phase == CLOSE, best.wrench, guess)
@@ -132,9 +150,9 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
         # a warm update's wrench0 is the converged solve at v0
         skip = warm & (k == 0) & reaching
         solving = (reaching & ~skip) | (phase == CLOSE) | (optimising & shared)
-        # phase 1 converges the boundary residual along with the task: a start's forward solve
-        # need only come near it (START_TOL)
-        tol = jnp.where(reaching, jnp.maximum(START_TOL, prob.solver.tol), prob.solver.tol)
+        # augmented phase 1 converges the boundary residual along with the task: a start's forward
+        # solve need only come near it (START_TOL)
+        tol = prob.solver.tol if nested else jnp.where(reaching, jnp.maximum(START_TOL, prob.solver.tol), prob.solver.tol)
         solver = dataclasses.replace(prob.solver, tol=tol)
 
         def forward(problem, v, guess):  # (x, RootInfo, and with ``in_inputs`` what ``root_in_inputs`` took)
@@ -147,15 +165,27 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
         wrench = jnp.where(skip, wrench0, unscaled(prob.robot, x, force_scale(*problem)))
         code = jnp.where(skip, status.SUCCESS, info.result).astype(jnp.int32)
 
-        def reached(v, wrench):
-            r = reach(v, wrench, k == 0)
-            r = r._replace(code=jnp.where(code == status.SUCCESS, r.code, code))
-            closer = (rank(r.code) < rank(best.code)) | ((rank(r.code) == rank(best.code)) & (r.e @ r.e < best.e @ best.e))
-            return jax.tree.map(lambda a, b: jnp.where(closer, a, b), r, best), c.steps + r.steps
+        if ns is None:
 
-        best, steps = lazily(reaching, reached, (best, c.steps), v, wrench)
-        k = jnp.where(reaching, k + 1, k)
-        phase = jnp.where(reaching, after_reach(k, best), jnp.where(phase == CLOSE, DONE, phase))
+            def reached(v, wrench):
+                r = reach_augmented(v, wrench, prob, plan, None if model is None else _where(k == 0, model, cold))
+                r = r._replace(code=jnp.where(code == status.SUCCESS, r.code, code))
+                return kept(r, best), c.steps + r.steps
+
+            best, steps = lazily(reaching, reached, (best, c.steps), v, wrench)
+            ended = reaching
+        else:
+
+            def stepped(v, x, info, taken):
+                return nested_step(ns, evaluate_at(v, x, info, prob, bare, taken), prob)
+
+            ns = lazily(reaching, stepped, ns, v, x, info, taken)
+            ended = reaching & ns.done
+            r = ns.result()._replace(model=cold)
+            best, steps = _where(ended, (kept(r, best), c.steps + r.steps), (best, c.steps))
+            ns = ns._replace(it=jnp.where(ended, 0, ns.it))  # the next pass begins the next start
+        k = jnp.where(ended, k + 1, k)
+        phase = jnp.where(ended, after_reach(k, best), jnp.where(phase == CLOSE, DONE, phase))
         if sqp is not None:
 
             def optimised(v, x, info, guess, taken):
@@ -171,7 +201,7 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
             phase = jnp.where(ended, CLOSE, phase)
         if not closing:
             phase = jnp.where(phase == CLOSE, DONE, phase)
-        return Tried(phase, k, best, steps, x, info, sqp, c.i)
+        return Tried(phase, k, best, steps, x, info, sqp, ns, c.i)
 
     def body(c):  # a pass once DONE costs one test
         return lazily(c.phase != DONE, step, c, c)._replace(i=c.i + 1)
@@ -185,12 +215,16 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
     none = Reach(v0, jnp.full(n, jnp.nan), jnp.full(prob.target.size, jnp.inf), 0, jnp.int32(status.OUTER_LIMIT), cold)
     first = after_reach(first_start, none)
     sqp = None if plan.objective is None else sqp_start(v0, jnp.full(n, jnp.nan), prob)
-    init = Tried(jnp.where(closing | (first != CLOSE), first, DONE), first_start, none, 0, jnp.zeros(n), unset_info(n), sqp, 0)
-    # the loop runs a pass for every start, phase 2's steps and the closing solve, the last ones
-    # no-ops once the phases are DONE: a bound that XLA finds without tracing the passes' data
-    # through the body (which it does for a loop whose condition reads the body's results, at a
-    # cost that grows with the body's size)
-    passes = n_starts - first_start + 1 + (0 if plan.objective is None else prob.options.max_steps + 1)
+    ns = nested_start(v0, jnp.full(n, jnp.nan), prob) if nested else None
+    init = Tried(
+        jnp.where(closing | (first != CLOSE), first, DONE), first_start, none, 0, jnp.zeros(n), unset_info(n), sqp, ns, 0
+    )
+    # the loop runs a pass for every start (nested: for each of its steps), phase 2's steps and the
+    # closing solve, the last ones no-ops once the phases are DONE: a bound that XLA finds without
+    # tracing the passes' data through the body (which it does for a loop whose condition reads the
+    # body's results, at a cost that grows with the body's size)
+    per_start = prob.options.max_steps + 1 if nested else 1
+    passes = (n_starts - first_start) * per_start + 1 + (0 if plan.objective is None else prob.options.max_steps + 1)
     tried = lax.while_loop(lambda c: c.i < passes, body, init)
     r, x, info = tried.best, tried.x, tried.info
     if closing and plan.objective is None:  # reached: its root, no closing solve (``at_root`` takes J)

@@ -15,7 +15,7 @@ from ..linalg import solve_spd
 from ..newton import lazily
 from ..qp import box_qp
 from ..shooting import force_scale, scaled, shoot, unscaled
-from .evaluation import Evaluation, evaluate, unset
+from .evaluation import Evaluation, unset
 from .problem import Plan, Problem, actuation_of, task_residual
 
 MU_START = 1e-3
@@ -138,48 +138,55 @@ def _where(keep, new, old):
 
 
 class NestedState(NamedTuple):
-    """``reach_nested``'s loop state."""
+    """Phase 1 with a converged forward solve at every step ("nested"), between steps
+    (``nested_start``, ``nested_step``)."""
 
     v: jax.Array  # the last accepted inputs
     ev: Evaluation  # the evaluation there
-    s: jax.Array  # the step to try next
+    s: jax.Array  # the step to try next: the next evaluation is at v + s, from ev.wrench
     mu: jax.Array  # damping
     nu: jax.Array  # its growth factor
-    it: jax.Array  # passes so far (the first evaluates the start)
+    it: jax.Array  # steps so far (the first evaluates the start)
     code: jax.Array
     done: jax.Array
 
+    def result(self) -> Reach:
+        """Where phase 1 from this start stands, as a Reach."""
+        return Reach(self.v, self.ev.wrench, self.ev.e, self.it - 1, self.code)
 
-def reach_nested(v0, wrench0, prob: Problem, plan: Plan) -> Reach:
-    """Phase 1 with a converged forward solve (implicitly differentiated) at every trial. The
-    loop's first pass evaluates the start, so the evaluation is compiled once."""
-    tol, max_steps = prob.options.tol, prob.options.max_steps
 
-    def cond(c):
-        return ~c.done
-
-    def body(c):
-        v, ev, s, mu, nu, it = c.v, c.ev, c.s, c.mu, c.nu, c.it
-        first = it == 0
-        trial = evaluate(v + s, ev.wrench, prob, plan)
-        linear = ev.e + ev.G @ s
-        actual = jnp.where(trial.code == status.SUCCESS, ev.e @ ev.e - trial.e @ trial.e, -jnp.inf)
-        damped = _damping(mu, nu, actual, ev.e @ ev.e - linear @ linear)
-        mu, nu = jnp.where(first, mu, damped[0]), jnp.where(first, nu, damped[1])
-        better = first | damped[2]
-        stalled = ~first & better & (actual <= STALLED * (ev.e @ ev.e))
-        v, ev = _where(better, (v + s, trial), (v, ev))
-        code, done = _reach_status(ev.e, ev.G, v, mu, it, prob, tol, max_steps, stalled)
-        solved = ev.code == status.SUCCESS
-        s = _lm_step(ev.G, ev.e, mu, prob.lo - v, prob.hi - v)
-        return NestedState(v, ev, s, mu, nu, it + 1, jnp.where(solved, code, ev.code), done | ~solved)
-
-    start = unset(v0, wrench0, prob)
-    init = NestedState(
-        v0, start, jnp.zeros_like(v0), jnp.asarray(MU_START), jnp.asarray(2.0), 0, jnp.int32(status.OUTER_LIMIT), False
+def nested_start(v0, wrench0, prob: Problem) -> NestedState:
+    """Nested phase 1 from v0 (``wrench0``: the base wrench there or near it, or NaN): its first
+    step evaluates v0."""
+    return NestedState(
+        v0,
+        unset(v0, wrench0, prob),
+        jnp.zeros_like(v0),
+        jnp.asarray(MU_START),
+        jnp.asarray(2.0),
+        0,
+        jnp.int32(status.OUTER_LIMIT),
+        False,
     )
-    c = lax.while_loop(cond, body, init)
-    return Reach(c.v, c.ev.wrench, c.ev.e, c.it - 1, c.code)
+
+
+def nested_step(c: NestedState, trial: Evaluation, prob: Problem) -> NestedState:
+    """Nested phase 1's step given ``trial``, the evaluation (converged forward solve, implicitly
+    differentiated) at v + s. ``find`` runs the steps in its own loop, so that they share its
+    forward solve in the compiled program."""
+    v, ev, s, mu, nu, it = c.v, c.ev, c.s, c.mu, c.nu, c.it
+    first = it == 0
+    linear = ev.e + ev.G @ s
+    actual = jnp.where(trial.code == status.SUCCESS, ev.e @ ev.e - trial.e @ trial.e, -jnp.inf)
+    damped = _damping(mu, nu, actual, ev.e @ ev.e - linear @ linear)
+    mu, nu = jnp.where(first, mu, damped[0]), jnp.where(first, nu, damped[1])
+    better = first | damped[2]
+    stalled = ~first & better & (actual <= STALLED * (ev.e @ ev.e))
+    v, ev = _where(better, (v + s, trial), (v, ev))
+    code, done = _reach_status(ev.e, ev.G, v, mu, it, prob, prob.options.tol, prob.options.max_steps, stalled)
+    solved = ev.code == status.SUCCESS
+    s = _lm_step(ev.G, ev.e, mu, prob.lo - v, prob.hi - v)
+    return NestedState(v, ev, s, mu, nu, it + 1, jnp.where(solved, code, ev.code), done | ~solved)
 
 
 class Linearisation(NamedTuple):
