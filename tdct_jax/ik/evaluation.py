@@ -69,9 +69,9 @@ def evaluate_at(v, x, info: RootInfo, prob: Problem, plan: Plan, taken=None) -> 
 
 
 def _one_pass(x, v, F_c, prob: Problem, plan: Plan, taken=None):
-    """(e, G, phi, dphi, dx/dv) at the root x at v from one forward-mode pass of the shooting residual r
-    and the tip pose over z = (x, v), with x eliminated by the implicit function theorem:
-    dz/dv = (-(dr/dx)^-1 dr/dv, I). ``taken``: ((J_r, J_p, J_R), p, R), that pass's Jacobians and
+    """(e, G, phi, dphi, dx/dv) at the root x at v from one forward-mode pass of the shooting
+    residual r and the tip pose over z = (x, v), with x eliminated by the implicit function
+    theorem: dz/dv = (-(dr/dx)^-1 dr/dv, I). ``taken``: ((J_r, J_p, J_R), p, R), that pass's Jacobians and
     tip, taken already (``root_in_inputs``'s Newton pass; primal only): no pass here. The
     stiffness objective's compliance (eq. 41) comes from the pass's columns in x, its derivative
     in v from one more pass (``_compliance_change``)."""
