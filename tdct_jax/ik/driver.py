@@ -142,12 +142,9 @@ def find(prob: Problem, v0, wrench0, tries, model: Model | None, plan: Plan) -> 
         guess = jnp.where(k == 0, wrench0, jnp.nan)
         if ns is not None:  # nested phase 1's trial point
             ns = _where(fresh, nested_start(v, guess, prob), ns)
-            v, guess = jnp.where(reaching, ns.v + ns.s, v), jnp.where(reaching, ns.ev.wrench + ns.ev.dwrench @ ns.s, guess)
+            v, guess = jnp.where(reaching, ns.v + ns.s, v), jnp.where(reaching, ns.ev.wrench, guess)
         if sqp is not None:  # phase 2's trial point
-            v, guess = (
-                jnp.where(optimising, sqp.v + sqp.s, v),
-                jnp.where(optimising, sqp.ev.wrench + sqp.ev.dwrench @ sqp.s, guess),
-            )
+            v, guess = jnp.where(optimising, sqp.v + sqp.s, v), jnp.where(optimising, sqp.ev.wrench, guess)
         v, guess = jnp.where(phase == CLOSE, best.v, v), jnp.where(phase == CLOSE, best.wrench, guess)
         problem = (prob.robot, actuation_of(v, prob, plan), prob.load, prob.gravity)
         # a warm update's wrench0 is the converged solve at v0

@@ -25,8 +25,7 @@ class Evaluation(NamedTuple):
     G: jax.Array  # de/dv
     phi: jax.Array  # objective (0 without one)
     dphi: jax.Array  # d phi / dv
-    wrench: jax.Array  # base wrench
-    dwrench: jax.Array  # its derivative in v: a solve at v + s starts from wrench + dwrench @ s
+    wrench: jax.Array  # base wrench, the next solve's start
     code: jax.Array  # the forward solve's status code
 
 
@@ -34,15 +33,7 @@ def unset(v, wrench, prob: Problem) -> Evaluation:
     """An Evaluation of zeros at the base wrench ``wrench`` (no evaluation): a loop's state
     before its first, without tracing ``evaluate`` for the shapes."""
     m, k = prob.target.size, v.shape[0]
-    return Evaluation(
-        jnp.zeros(m),
-        jnp.zeros((m, k)),
-        jnp.zeros(()),
-        jnp.zeros(k),
-        wrench,
-        jnp.zeros((*jnp.shape(wrench), k)),
-        jnp.zeros((), jnp.int32),
-    )
+    return Evaluation(jnp.zeros(m), jnp.zeros((m, k)), jnp.zeros(()), jnp.zeros(k), wrench, jnp.zeros((), jnp.int32))
 
 
 def evaluate(v, guess, prob: Problem, plan: Plan) -> Evaluation:
@@ -64,14 +55,14 @@ def evaluate_at(v, x, info: RootInfo, prob: Problem, plan: Plan, taken=None) -> 
     F_c = force_scale(*problem)
     # x with root's implicit derivatives, for the derivatives of this evaluation (``_find_jvp``)
     x = at_root(*problem, prob.solver, x, info.jacobians[0])
-    e, G, phi, dphi, dx = _one_pass(x, v, F_c, prob, plan, taken)
-    return Evaluation(e, G, phi, dphi, unscaled(prob.robot, x, F_c), unscaled(prob.robot, dx, F_c), info.result)
+    e, G, phi, dphi = _one_pass(x, v, F_c, prob, plan, taken)
+    return Evaluation(e, G, phi, dphi, unscaled(prob.robot, x, F_c), info.result)
 
 
 def _one_pass(x, v, F_c, prob: Problem, plan: Plan, taken=None):
-    """(e, G, phi, dphi, dx/dv) at the root x at v from one forward-mode pass of the shooting
-    residual r and the tip pose over z = (x, v), with x eliminated by the implicit function
-    theorem: dz/dv = (-(dr/dx)^-1 dr/dv, I). ``taken``: ((J_r, J_p, J_R), p, R), that pass's Jacobians and
+    """(e, G, phi, dphi) at the root x at v from one forward-mode pass of the shooting residual r
+    and the tip pose over z = (x, v), with x eliminated by the implicit function theorem:
+    dz/dv = (-(dr/dx)^-1 dr/dv, I). ``taken``: ((J_r, J_p, J_R), p, R), that pass's Jacobians and
     tip, taken already (``root_in_inputs``'s Newton pass; primal only): no pass here. The
     stiffness objective's compliance (eq. 41) comes from the pass's columns in x, its derivative
     in v from one more pass (``_compliance_change``)."""
@@ -93,7 +84,7 @@ def _one_pass(x, v, F_c, prob: Problem, plan: Plan, taken=None):
 
     e, G = task(p, R), _along(task, (p, R), (J_p @ D, J_R @ D), (1, 2))
     if plan.objective is None:
-        return e, G, jnp.zeros(()), jnp.zeros(k), D[:n]
+        return e, G, jnp.zeros(()), jnp.zeros(k)
     if plan.objective == "stiffness":
         C = tip_compliance(prob.robot, R, J_r[:, :n], J_p[:, :n], J_R[..., :n], F_c)
         dC = jnp.zeros((6, 6, k)).at[:3, :3].set(_compliance_change(z, D, J_r[:, :n], J_p[:, :n], F_c, prob, plan))
@@ -101,7 +92,7 @@ def _one_pass(x, v, F_c, prob: Problem, plan: Plan, taken=None):
         def stiffness(C):  # of the positional compliance alone
             return objective_value(None, C, None, prob, plan)
 
-        return e, G, stiffness(C), _along(stiffness, (C,), (dC,), (2,)), D[:n]
+        return e, G, stiffness(C), _along(stiffness, (C,), (dC,), (2,))
 
     def objective(z):
         act = actuation_of(z[n:], prob, plan)
@@ -109,7 +100,7 @@ def _one_pass(x, v, F_c, prob: Problem, plan: Plan, taken=None):
             act = general.with_driven(act, z[:n], F_c)
         return objective_value(None, None, act, prob, plan)
 
-    return e, G, objective(z), _along(objective, (z,), (D,), (1,)), D[:n]
+    return e, G, objective(z), _along(objective, (z,), (D,), (1,))
 
 
 def _along(f, primals, tangents, axes):
@@ -153,8 +144,7 @@ def _through_solution(v, guess, prob: Problem, plan: Plan) -> Evaluation:
         e = task_residual(sol.tip_position, sol.tip_rotation, prob.target, prob.robot.length)
         pulled = general.with_driven(act, x, F_c) if isinstance(act, GeneralActuation) else act  # the driven tensions found
         phi = objective_value(sol, None, pulled, prob, plan)
-        wrench = unscaled(prob.robot, x, F_c)
-        return (e, phi, wrench), (e, phi, wrench, code)
+        return (e, phi), (e, phi, unscaled(prob.robot, x, F_c), code)
 
-    (G, dphi, dwrench), (e, phi, wrench, code) = jax.jacfwd(f, has_aux=True)(v)
-    return Evaluation(e, G, phi, dphi, wrench, dwrench, code)
+    (G, dphi), (e, phi, wrench, code) = jax.jacfwd(f, has_aux=True)(v)
+    return Evaluation(e, G, phi, dphi, wrench, code)
