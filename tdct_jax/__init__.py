@@ -1,4 +1,4 @@
-"""tdct_jax: differentiable statics of the tendon-driven concentric-tube (TDCT) soft robot."""
+"""tdct_jax: differentiable statics of tendon-driven continuum robots, the TDCT robot first."""
 
 import jax
 
@@ -9,6 +9,7 @@ __version__ = "0.1.0"
 use_fast_compile_flags()
 jax.config.update("jax_enable_x64", True)
 
+from . import checks, fields  # noqa: E402
 from . import status as status  # noqa: E402
 from .calibrate import Calibration as Calibration  # noqa: E402
 from .calibrate import calibrate as calibrate  # noqa: E402
@@ -24,8 +25,9 @@ from .data import Experiment as Experiment  # noqa: E402
 from .data import read_experiment as read_experiment  # noqa: E402
 from .data import read_experiments as read_experiments  # noqa: E402
 from .data import write_experiment as write_experiment  # noqa: E402
-from .description import GeneralRobot as GeneralRobot  # noqa: E402
+from .description import CalibrationWarning as CalibrationWarning  # noqa: E402
 from .description import PointMass as PointMass  # noqa: E402
+from .description import Robot as Robot  # noqa: E402
 from .description import Section as Section  # noqa: E402
 from .description import Tendon as Tendon  # noqa: E402
 from .description import Tube as Tube  # noqa: E402
@@ -41,11 +43,10 @@ from .ik import Stiffness as Stiffness  # noqa: E402
 from .ik import Target as Target  # noqa: E402
 from .ik import inverse_kinematics as inverse_kinematics  # noqa: E402
 from .ik import track as track  # noqa: E402
-from .inputs import GeneralActuation as GeneralActuation  # noqa: E402
+from .inputs import STANDARD_GRAVITY as STANDARD_GRAVITY  # noqa: E402
+from .inputs import Actuation as Actuation  # noqa: E402
 from .inputs import Loads as Loads  # noqa: E402
-from .loads import STANDARD_GRAVITY as STANDARD_GRAVITY  # noqa: E402
-from .loads import Actuation as Actuation  # noqa: E402
-from .loads import TipLoad as TipLoad  # noqa: E402
+from .inputs import TipLoad as TipLoad  # noqa: E402
 from .manipulation import Capacity as Capacity  # noqa: E402
 from .manipulation import Optimum as Optimum  # noqa: E402
 from .manipulation import capacity as capacity  # noqa: E402
@@ -72,18 +73,26 @@ from .results import SweepChunk as SweepChunk  # noqa: E402
 from .results import SweepResult as SweepResult  # noqa: E402
 from .results import gather as gather  # noqa: E402
 from .rig import Rig as Rig  # noqa: E402
-from .robot import CalibrationWarning as CalibrationWarning  # noqa: E402
-from .robot import Robot as Robot  # noqa: E402
 from .scene import Capsule as Capsule  # noqa: E402
 from .scene import Distance as Distance  # noqa: E402
 from .scene import Plane as Plane  # noqa: E402
 from .scene import Scene as Scene  # noqa: E402
 from .scene import Sphere as Sphere  # noqa: E402
 from .scene import read_scene as read_scene  # noqa: E402
-from .solve import GeneralSolution as GeneralSolution  # noqa: E402
 from .solve import Solution as Solution  # noqa: E402
 from .solve import solve as solve  # noqa: E402
 from .solve import tip_angle as tip_angle  # noqa: E402
 from .status import ConvergenceError as ConvergenceError  # noqa: E402
 from .sweep import sweep as sweep  # noqa: E402
 from .sweep import sweep_chunks as sweep_chunks  # noqa: E402
+
+_RENAMED = {"Robot": ("Robot", Robot), "Actuation": ("Actuation", Actuation), "Solution": ("Solution", Solution)}
+
+
+def __getattr__(name):
+    """The former names of merged types (``tdct.Robot``): the merged type, warning once."""
+    if name in _RENAMED:
+        new, obj = _RENAMED[name]
+        checks.deprecated(f"tdct.{name}", f"tdct.{new}")
+        return obj
+    raise AttributeError(f"module 'tdct_jax' has no attribute {name!r}")

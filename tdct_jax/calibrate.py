@@ -2,7 +2,7 @@
 
 The paper fits the silicone's Young's modulus by minimising the error between five measured shapes
 and the model. Here any subset of a robot's scalar fields (``fields.py``: the paper Robot's
-"E_silicone", ..., a GeneralRobot's "sections[*].E", "tendons[0].offset", ...) is fitted to any
+"E_silicone", ..., a Robot's "sections[*].E", "tendons[0].offset", ...) is fitted to any
 number of experiments by Levenberg-Marquardt on the point-wise shape residuals, with the Jacobian
 exact (forward-mode autodiff through the implicitly differentiated shooting solution, vmapped over
 experiments).
@@ -23,14 +23,12 @@ from tqdm import tqdm
 from . import fields, general, status
 from .checks import check_integer
 from .data import Experiment, stack
-from .description import GeneralRobot
-from .inputs import GeneralActuation, Loads
+from .description import Robot
+from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
 from .lm import covariance, levenberg_marquardt
-from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
 from .mechanics import check_params, shape_errors
 from .options import DEFAULT_SOLVER, SolverOptions
-from .robot import Robot
-from .solve import Solution, check_inputs, check_solution, solve
+from .solve import Solution, check_solution, problem, solve
 
 FBG_POINTS = 33
 """Points per synthetic shape: every 5 mm along the paper's 160 mm robot."""
@@ -96,7 +94,7 @@ class Calibration:
     values: dict
     std_errors: dict
     correlation: np.ndarray
-    robot: Robot | GeneralRobot
+    robot: Robot | Robot
     names: tuple
     rmse_before: np.ndarray
     rmse_after: np.ndarray
@@ -167,7 +165,7 @@ class Calibration:
 
 
 def calibrate(
-    robot: Robot | GeneralRobot,
+    robot: Robot | Robot,
     experiments: Sequence[Experiment],
     params: Sequence[str] = ("E_silicone",),
     *,
@@ -186,13 +184,13 @@ def calibrate(
     (Poisson ratios, tendon angles and twists are fitted as they are).
 
     Args:
-        robot: the robot (a Robot or a GeneralRobot) with the starting values of ``params`` and
+        robot: the robot (a Robot or a Robot) with the starting values of ``params`` and
             every other field fixed.
         experiments: measured shapes and their conditions (``tdct_jax.data.read_experiments``);
-            for a GeneralRobot their actuations are GeneralActuations (or Actuations of its one
+            for a Robot their actuations are GeneralActuations (or Actuations of its one
             tube) and their loads Loads or TipLoads.
         params: field names to fit (``fields.names``): for a Robot e.g. ("E_silicone",
-            "tendon_offset"), for a GeneralRobot e.g. ("sections[*].E", "tendons[0].offset"),
+            "tendon_offset"), for a Robot e.g. ("sections[*].E", "tendons[0].offset"),
             "[*]" fitting one value shared by every item; a single name may be given as a string.
         max_steps: most Levenberg-Marquardt trial steps (the fit's own limit).
         xtol: converged when the Gauss-Newton step changes no field by more than this (relative
@@ -276,7 +274,7 @@ def _as_names(params) -> tuple:
         raise ValueError(f"params = {params!r} must be a Robot field name or a sequence of them") from None
 
 
-def _check_params(robot: Robot | GeneralRobot, params: tuple) -> None:
+def _check_params(robot: Robot | Robot, params: tuple) -> None:
     if not params or len(set(params)) != len(params):
         raise ValueError(f"params = {params!r} must name at least one Robot field, each once")
     check_params(robot, params)
@@ -285,24 +283,24 @@ def _check_params(robot: Robot | GeneralRobot, params: tuple) -> None:
             raise ValueError(f"{p} = {fields.value(robot, p):g} must start positive: it is fitted in log space")
 
 
-def _checked_experiments(robot: Robot | GeneralRobot, experiments: list, solver: SolverOptions) -> list:
-    """The experiments checked against the robot; for a GeneralRobot with their actuations and
-    loads as GeneralActuation and Loads."""
-    if not isinstance(robot, GeneralRobot):
+def _checked_experiments(robot: Robot | Robot, experiments: list, solver: SolverOptions) -> list:
+    """The experiments checked against the robot; for a Robot with their actuations and
+    loads as Actuation and Loads."""
+    if not isinstance(robot, Robot):
         for e in experiments:
             check_inputs(robot, e.act, e.load, solver)
         return experiments
     out = []
     for e in experiments:
-        act, load = GeneralActuation.of(e.act, robot.n_tubes), Loads.of(e.load)
+        act, load = Actuation.of(e.act, robot.n_tubes), Loads.of(e.load)
         general.check_arguments(robot, act, load, solver)
         out.append(dataclasses.replace(e, act=act, load=load))
     return out
 
 
 def synthesize(
-    robot: Robot | GeneralRobot,
-    actuations: Sequence[Actuation | GeneralActuation],
+    robot: Robot | Robot,
+    actuations: Sequence[Actuation | Actuation],
     *,
     tip_masses: Sequence[float] | None = None,
     loads: Sequence[TipLoad | Loads] | None = None,
@@ -317,11 +315,11 @@ def synthesize(
     coordinate (numpy's default generator seeded with ``seed``).
 
     Args:
-        robot: the robot that "is measured" (a Robot or a GeneralRobot).
-        actuations: one Actuation (or, for a GeneralRobot, GeneralActuation) per experiment.
+        robot: the robot that "is measured" (a Robot or a Robot).
+        actuations: one Actuation (or, for a Robot, Actuation) per experiment.
         tip_masses: tip mass per experiment [kg] (default none).
         loads: further loads per experiment, world frame (default none): TipLoads, or for a
-            GeneralRobot also Loads.
+            Robot also Loads.
         n_points: points per shape (>= 2).
         noise: noise standard deviation [m] (>= 0).
         seed: random seed.
@@ -334,7 +332,7 @@ def synthesize(
     """
     n_exp = len(actuations)
     tip_masses = [0.0] * n_exp if tip_masses is None else list(tip_masses)
-    loads = [TipLoad()] * n_exp if loads is None else list(loads)
+    loads = [Loads()] * n_exp if loads is None else list(loads)
     if n_exp == 0 or len(tip_masses) != n_exp or len(loads) != n_exp:
         raise ValueError(f"need one actuation, tip mass and load per experiment, got {n_exp}, {len(tip_masses)} and {len(loads)}")
     n_points = check_integer("n_points", n_points, 2)
@@ -356,15 +354,15 @@ def synthesize(
     ]
 
 
-def condition_name(act: Actuation | GeneralActuation, tip_mass: float = 0.0) -> str:
+def condition_name(act: Actuation | Actuation, tip_mass: float = 0.0) -> str:
     """A file-name-safe label of a measurement condition, e.g. "t6-0-0-0N_d80mm_m20g"; a
-    GeneralActuation's lists every tube's depth and the driven tendons' displacements, e.g.
+    Actuation's lists every tube's depth and the driven tendons' displacements, e.g.
     "t0-0.4N_x3-1mm_d80-20mm_m0g" (displacements 3 and 1 mm, tubes at 80 and 20 mm)."""
 
     def joined(values, scale=1.0):
         return "-".join(f"{v * scale:g}" for v in np.asarray(values, dtype=float))
 
-    if not isinstance(act, GeneralActuation):
+    if not isinstance(act, Actuation):
         return f"t{joined(act.tensions)}N_d{float(act.insertion) * 1e3:g}mm_m{float(tip_mass) * 1e3:g}g"
     moved = f"_x{joined(act.displacements, 1e3)}mm" if act.driven else ""
     depths = f"_d{joined(act.insertions, 1e3)}mm" if np.size(act.insertions) else ""

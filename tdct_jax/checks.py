@@ -232,3 +232,14 @@ def read_toml(path, what: str) -> dict:
         return tomllib.loads(path.read_text())
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
         raise ValueError(f"cannot read {what} {path}: {e}") from None
+
+
+_DEPRECATED: set[str] = set()
+
+
+def deprecated(old: str, new: str) -> None:
+    """A FutureWarning, once per process for each ``old`` name, that says what to write instead."""
+    if old in _DEPRECATED:
+        return
+    _DEPRECATED.add(old)
+    warn_user(f"{old} is deprecated and will be removed: write {new} (CHANGELOG.md)", FutureWarning)

@@ -18,13 +18,12 @@ import numpy as np
 
 from . import __version__, fields, general, status
 from .checks import UnitWarning, check_output, interval, target_note
-from .description import GeneralRobot
+from .description import Robot
 from .ik import MAX_STEPS as IK_MAX_STEPS
-from .inputs import GeneralActuation, Loads
-from .loads import STANDARD_GRAVITY, Actuation, TipLoad
+from .inputs import STANDARD_GRAVITY, Actuation, Loads
 from .mechanics import compliance, compliance_ellipsoid
 from .options import MAX_ITER, STEPS, SolverOptions
-from .robot import CalibrationWarning, Robot
+from .description import CalibrationWarning
 from .scene import read_scene
 from .solve import check_solution, solve
 from .status import ConvergenceError
@@ -392,11 +391,11 @@ def _check_output(dest: str, flag: str, path) -> None:
     check_output(flag, path, suffixes=formats, kind="an image format matplotlib writes")
 
 
-def _robot(args, general: bool = False) -> Robot | GeneralRobot:
+def _robot(args, general: bool = False) -> Robot | Robot:
     """The robot of --robot (default: the paper's) with the --set fields replaced (fields.py names);
-    a robot file with [[sections]] (a GeneralRobot) only for the verbs that take one (``general``)."""
+    a robot file with [[sections]] (a Robot) only for the verbs that take one (``general``)."""
     robot = Robot.from_toml(args.robot) if args.robot else Robot()
-    if isinstance(robot, GeneralRobot) and not general:
+    if isinstance(robot, Robot) and not general:
         raise ValueError(
             f"--robot {args.robot}: tdct {args.verb} takes the paper's robot only so far (a file of Robot fields); "
             "a robot file with [[sections]] works with tdct solve, tdct compliance and tdct ik"
@@ -424,8 +423,8 @@ def _check_tensions(flag: str, tensions, robot: Robot) -> None:
 
 def _inputs(args):
     """Robot, actuation, load and solve options from the shared flags, checked in the units typed.
-    The paper's Robot becomes its GeneralRobot (``Robot.to_general``) for the flags only a
-    GeneralRobot takes (--displacements-mm, --point-load)."""
+    The paper's Robot becomes its Robot (``Robot.to_general``) for the flags only a
+    Robot takes (--displacements-mm, --point-load)."""
     robot = _robot(args, general=True)
     solver = _solver(args)
     if isinstance(robot, Robot) and (args.displacements_mm or args.point_load):
@@ -435,7 +434,7 @@ def _inputs(args):
         raise ValueError(f"--tensions {','.join(f'{t:g}' for t in args.tensions)}: the robot has no tendons; leave it out")
     tensions = args.tensions if args.tensions is not None else (0.0,) * n_t
     _check_tensions("--tensions", tensions, robot)
-    n_tubes = robot.n_tubes if isinstance(robot, GeneralRobot) else 1
+    n_tubes = robot.n_tubes if isinstance(robot, Robot) else 1
     if args.insertions_mm is not None:
         flag, depths = "--insertions-mm", args.insertions_mm
         check_count(flag, depths, n_tubes, f"the robot has {n_tubes} tubes, one depth each")
@@ -448,7 +447,7 @@ def _inputs(args):
     check_flag(flag, depths, 0.0, length_mm, " mm")
     if args.tip_mass_g is not None:
         check_flag("--tip-mass-g", args.tip_mass_g, 0.0, unit=" g")
-        tip_force = TipLoad.from_mass(args.tip_mass_g * 1e-3).force
+        tip_force = Loads.from_mass(args.tip_mass_g * 1e-3).force
     else:
         tip_force = args.tip_force or (0.0, 0.0, 0.0)
     options = dict(gravity=_gravity(args), solver=solver)
@@ -459,13 +458,13 @@ def _inputs(args):
     for s_mm, force in args.point_load:
         where = f"--point-load {s_mm:g}:{','.join(f'{f:g}' for f in force)}: arc length"
         check_flag(where, s_mm, 0.0, length_mm, " mm")
-    act = GeneralActuation(tensions, [d * 1e-3 for d in depths], [d * 1e-3 for _, d in pulled], [i - 1 for i, _ in pulled])
+    act = Actuation(tensions, [d * 1e-3 for d in depths], [d * 1e-3 for _, d in pulled], [i - 1 for i, _ in pulled])
     point_s = [s * 1e-3 for s, _ in args.point_load]
     load = Loads(tip_force, args.tip_moment, point_s, [f for _, f in args.point_load] if point_s else None)
     return robot, act, load, options
 
 
-def _check_displacements(pulled, robot: GeneralRobot) -> None:
+def _check_displacements(pulled, robot: Robot) -> None:
     """--displacements-mm: known tendons, each once, each less than its length from the base to its
     anchor in the straight robot (``general.check_arguments`` checks the same in SI units)."""
     if not pulled:
@@ -535,7 +534,7 @@ def _solve_command(args) -> int:
     if args.scene:
         scene = read_scene(args.scene)
         if isinstance(robot, Robot):  # contact is solved on the general description (solve does the same)
-            robot, act, load = robot.to_general(), GeneralActuation.of(act, 1), Loads.of(load)
+            robot, act, load = robot.to_general(), Actuation.of(act, 1), Loads.of(load)
         try:
             scene.check_base(float(robot.sections[0].outer_diameter) / 2)
         except ValueError as e:
@@ -545,7 +544,7 @@ def _solve_command(args) -> int:
     angle = float(np.degrees(sol.tip_angle))
     converged, res, iters = bool(sol.converged), float(sol.residual_norm), int(sol.iterations)
     tendons = {}
-    if isinstance(robot, GeneralRobot):
+    if isinstance(robot, Robot):
         tendons = dict(
             tensions_N=np.asarray(sol.tensions).tolist(),
             displacements_mm=(np.asarray(sol.displacements) * 1e3).tolist(),
@@ -581,7 +580,7 @@ def _solve_command(args) -> int:
     if args.plot:
         from .plotting import plot_robot, plot_shape
 
-        if isinstance(robot, GeneralRobot):
+        if isinstance(robot, Robot):
             plot_robot(sol, robot, act, Loads.of(load).with_scene(scene), args.plot, title=_conditions(args, act))
         else:
             plot_shape(sol, act.insertion, args.plot, title=_conditions(args, act))
@@ -765,8 +764,8 @@ def _calibrate_rig_command(args) -> int:
 
 def _depths_mm(act) -> dict:
     """The tube depth of an actuation in mm, for output: ``insertion_mm`` (the paper robot's
-    Actuation) or ``insertions_mm``, one per tube (a GeneralActuation)."""
-    if isinstance(act, GeneralActuation):
+    Actuation) or ``insertions_mm``, one per tube (a Actuation)."""
+    if isinstance(act, Actuation):
         return dict(insertions_mm=(1e3 * np.asarray(act.insertions)).tolist())
     return dict(insertion_mm=1e3 * float(act.insertion))
 
@@ -775,7 +774,7 @@ def _ik_command(args) -> int:
     from . import ik
 
     robot = _robot(args, general=True)
-    general_robot = isinstance(robot, GeneralRobot)
+    general_robot = isinstance(robot, Robot)
     solver = _solver(args)
     length_mm = 1e3 * float(robot.length)
     check_flag("--max-tension-n", args.max_tension_n, 0.0, unit=" N")
@@ -821,7 +820,7 @@ def _ik_command(args) -> int:
         )
     if args.insertion_mm is not None and n_tubes == 0:
         raise ValueError(f"--insertion-mm {args.insertion_mm:g}: the robot has no tubes; leave it out")
-    load = TipLoad.from_mass(args.tip_mass_g * 1e-3)
+    load = Loads.from_mass(args.tip_mass_g * 1e-3)
     result = ik.inverse_kinematics(
         robot,
         target,

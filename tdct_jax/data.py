@@ -61,9 +61,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .checks import as_array, check_range, is_concrete
-from .inputs import GeneralActuation, Loads
-from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
-from .robot import Robot
+from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
 from .tree import pytree, set_fields, static, unchecked
 
 VERSION = "1"
@@ -100,11 +98,11 @@ class Experiment:
             >= 0 (a repeat is allowed only for padding points of weight 0, see ``stack``).
         position: measured positions [m], shape (n, 3), robot base frame = world frame (base at
             the origin, axis +z, gravity -y).
-        act: tendon tensions [N] and tube insertion [m]: an Actuation, or for a GeneralRobot a
-            GeneralActuation (tensions, displacements, each tube's insertion; not in the shape-file
+        act: tendon tensions [N] and tube insertion [m]: an Actuation, or for a Robot a
+            Actuation (tensions, displacements, each tube's insertion; not in the shape-file
             format yet).
         load: tip force [N] and moment [N m], world frame, without the tip mass; none by default.
-            A TipLoad, or for a GeneralRobot also Loads (point loads along the body).
+            A TipLoad, or for a Robot also Loads (point loads along the body).
         tip_mass: mass hanging at the tip [kg], >= 0.
         weight: weight of each point, shape (n,), >= 0; None means all ones (0 marks padding).
         name: a label (static: experiments with different names do not share one compilation).
@@ -112,16 +110,16 @@ class Experiment:
 
     s: object
     position: object
-    act: Actuation | GeneralActuation
-    load: TipLoad | Loads = dataclasses.field(default_factory=TipLoad)
+    act: Actuation | Actuation
+    load: Loads = dataclasses.field(default_factory=Loads)
     tip_mass: float = 0.0
     weight: object = None
     name: str = static(default="")
 
     def __post_init__(self):
-        if not isinstance(self.act, (Actuation, GeneralActuation)):
-            raise TypeError(f"act must be a tdct.Actuation or tdct.GeneralActuation, got {type(self.act).__name__}")
-        load = TipLoad() if self.load is None else self.load
+        if not isinstance(self.act, (Actuation, Actuation)):
+            raise TypeError(f"act must be a tdct.Actuation or tdct.Actuation, got {type(self.act).__name__}")
+        load = Loads() if self.load is None else self.load
         if not isinstance(load, (TipLoad, Loads)):
             raise TypeError(f"load must be a tdct.TipLoad or tdct.Loads, got {type(load).__name__}")
         if not isinstance(self.name, str):
@@ -396,7 +394,7 @@ def write_experiment(path: str | os.PathLike, exp: Experiment) -> Path:
     Raises:
         ValueError: a stacked experiment, weights other than 1 (the file has no weight column),
             or a name with line breaks or surrounding spaces.
-        TypeError: a GeneralActuation or Loads (the format holds an Actuation and a TipLoad).
+        TypeError: a Actuation or Loads (the format holds an Actuation and a TipLoad).
     """
     if not isinstance(exp.act, Actuation) or not isinstance(exp.load, TipLoad):
         raise TypeError(
@@ -442,7 +440,7 @@ def stack(experiments: Sequence[Experiment]) -> Experiment:
     Shapes with fewer points are padded to the longest by repeating their last point with
     weight 0. The stack's ``name`` is "": the names stay with the caller's list, in order.
 
-    Experiments with a GeneralActuation stack into one (all of them, with the same ``driven``);
+    Experiments with a Actuation stack into one (all of them, with the same ``driven``);
     loads stack as TipLoads, or as Loads (TipLoads among them converted) with the same number of
     point loads.
 
@@ -461,7 +459,7 @@ def stack(experiments: Sequence[Experiment]) -> Experiment:
     if len(set(tendons)) > 1:
         counts = ", ".join(f"{label} has {t}" for label, t in zip(labels, tendons, strict=True))
         raise ValueError(f"cannot stack experiments with different numbers of tendons: {counts}")
-    general = [isinstance(e.act, GeneralActuation) for e in experiments]
+    general = [isinstance(e.act, Actuation) for e in experiments]
     if any(general) and (not all(general) or len({e.act.driven for e in experiments}) > 1):
         kinds = ", ".join(f"{label} has {_actuation_kind(e.act)}" for label, e in zip(labels, experiments, strict=True))
         raise ValueError(
@@ -490,7 +488,7 @@ def stack(experiments: Sequence[Experiment]) -> Experiment:
 
     if all(general):
         act = unchecked(
-            GeneralActuation, driven=experiments[0].act.driven, **leaves([e.act for e in experiments], GeneralActuation)
+            Actuation, driven=experiments[0].act.driven, **leaves([e.act for e in experiments], Actuation)
         )
     else:
         act = Actuation(stacked(lambda e: e.act.tensions), stacked(lambda e: e.act.insertion))
@@ -507,4 +505,4 @@ def stack(experiments: Sequence[Experiment]) -> Experiment:
 
 
 def _actuation_kind(act) -> str:
-    return f"GeneralActuation(driven={act.driven})" if isinstance(act, GeneralActuation) else type(act).__name__
+    return f"Actuation(driven={act.driven})" if isinstance(act, Actuation) else type(act).__name__

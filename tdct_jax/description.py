@@ -1,10 +1,6 @@
-"""Any tendon-driven continuum robot as data (issue 23): sections, tendons, tubes and point masses,
-every number a differentiable leaf, and the TOML robot file that describes one.
-
-``tdct.Robot`` stays the paper's robot with its own field names (calibration, sweeps, the CLI and
-the paper studies use them) and its own solver path; ``Robot.to_general()`` gives the same robot as
-a ``GeneralRobot``, and ``Robot.from_toml`` returns a ``GeneralRobot`` for a file with
-``[[sections]]``. ``tdct.solve`` and ``tdct.compliance`` take either (docs/architecture.md).
+"""Any tendon-driven continuum robot as data: sections, tendons, tubes and point masses, every
+number a differentiable leaf, and the TOML robot file that describes one. The paper's robot is a
+preset of this one description (``Robot.paper()``, presets.py; ``tdct_jax/robots/paper.toml``).
 
 Counts (sections, tendons, tubes, masses) are static: they are the lengths of tuples, part of the
 tree structure. A tendon anchored at the tip (``end=None``) adds no integration breakpoint; one
@@ -16,12 +12,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
+from typing import ClassVar
 
 import jax.numpy as jnp
 import numpy as np
 
-from .checks import as_array, check_range, is_concrete, read_toml
-from .tree import pytree, set_fields
+from . import fields
+from .checks import UnitWarning, as_array, check_range, deprecated, fmt, interval, is_concrete, read_toml, warn_user
+from .tree import pytree, set_fields, static
 
 NU_RANGE = (-1.0, 0.5)
 """Poisson ratio: (-1, 0.5], open below."""
@@ -82,7 +80,8 @@ class Tendon:
 
     Attributes:
         offset: distance from the axis [m].
-        angle: angle about +z from body +x at the base [rad] (the file gives ``angle_deg``).
+        angle: angle about +z from body +x at the base [rad] (the robot file and the command line
+            take degrees, ``angle_deg``); beyond 2 pi it gets a UnitWarning (degrees given?).
         twist: helical twist rate [rad/m] (the file gives ``twist_deg_per_m``); None (default):
             straight, and the solver skips the helical terms unless some tendon is helical.
         end: arc length of the anchor [m], in (0, L]; None (default): the tip, and no breakpoint.
@@ -101,6 +100,12 @@ class Tendon:
         units = dict(offset=" m", angle=" rad", twist=" rad/m", end=" m", max_tension=" N", stiffness=" N")
         _scalars(self, units, optional=("twist", "end", "max_tension", "stiffness"))
         check_range("Tendon.offset", self.offset, 0.0, unit=" m")
+        if is_concrete(self.angle) and abs(float(self.angle)) > 2 * math.pi:
+            warn_user(
+                f"Tendon.angle = {float(self.angle):g} rad is more than a full turn: angles are in radians in Python "
+                f"(did you mean {math.radians(float(self.angle)):.4g} rad, i.e. {float(self.angle):g} deg?)",
+                UnitWarning,
+            )
         for name, unit in (("end", " m"), ("max_tension", " N"), ("stiffness", " N")):
             if getattr(self, name) is not None:
                 check_range(f"Tendon.{name}", getattr(self, name), 0.0, lo_open=True, unit=unit)
@@ -118,7 +123,7 @@ class Tendon:
 @pytree
 class Tube:
     """A stiffening tube in the central channel, inserted from the base to a depth the actuation
-    sets (``GeneralActuation.insertions``). It slides freely: it adds bending stiffness and weight,
+    sets (``Actuation.insertions``). It slides freely: it adds bending stiffness and weight,
     forbids shear where it is (eqs. 14-16), and nothing axially or in torsion.
 
     Attributes:
@@ -165,12 +170,30 @@ class PointMass:
         check_range("PointMass.mass", self.mass, 0.0, unit=" kg")
 
 
+class _PaperByDefault(type):
+    """``Robot()`` or ``Robot(E_silicone=...)`` (no sections: the former paper robot class) gives
+    ``Robot.paper(...)``, with a FutureWarning once."""
+
+    def __call__(cls, *args, **kwargs):
+        if not args and "sections" not in kwargs:
+            deprecated("tdct.Robot() for the paper's robot", "tdct.Robot.paper()")
+            return cls.paper(**kwargs)
+        return super().__call__(*args, **kwargs)
+
+
+class CalibrationWarning(UserWarning):
+    """Inputs outside the range a robot was calibrated over: a note, not an error."""
+
+
 @pytree
-class GeneralRobot:
+class Robot(metaclass=_PaperByDefault):
     """A tendon-driven continuum robot: sections along the arc length, tendons, tubes, point masses.
 
     Every number is a differentiable leaf; the counts are static. The sections run from the base
     in order, each to its own ``end``; the last must end at ``length`` (the solver uses ``length``).
+    ``Robot.paper()`` is the paper's robot (Table II); ``Robot.from_toml`` reads a robot file;
+    ``robot.replace({"sections[0].E": 1e6})`` changes fields by name (fields.py), traced values
+    included, so ``jax.grad`` reaches them.
 
     Attributes:
         length: L [m].
@@ -178,6 +201,9 @@ class GeneralRobot:
         tendons: tuple of Tendon, in actuation order (none is valid).
         tubes: tuple of Tube, outermost first, each inside the one before (none is valid).
         masses: tuple of PointMass.
+        calibrated_tension: (lowest, highest) tension [N] the robot was calibrated over (static),
+            or None; inputs beyond it get a CalibrationWarning, not an error.
+        calibrated_tip_force: (lowest, highest) tip force magnitude [N] likewise (static), or None.
 
     Raises:
         ValueError: bad values, naming the field (``sections[1].end``), the value and the range.
@@ -188,6 +214,10 @@ class GeneralRobot:
     tendons: tuple = ()
     tubes: tuple = ()
     masses: tuple = ()
+    calibrated_tension: tuple | None = static(default=None)
+    calibrated_tip_force: tuple | None = static(default=None)
+
+    ITEMS: ClassVar[dict] = {}  # the item kinds and their classes, for fields.py (set below)
 
     def __post_init__(self):
         set_fields(self, length=as_array("length", self.length, (), unit=" m"))
@@ -200,6 +230,14 @@ class GeneralRobot:
             set_fields(self, **{name: items})
         if not self.sections:
             raise ValueError("sections: a robot needs at least one section, got none")
+        for name in ("calibrated_tension", "calibrated_tip_force"):
+            bounds = getattr(self, name)
+            if bounds is not None:
+                bounds = as_array(name, bounds, (2,), unit=" N")
+                check_range(name, bounds, 0.0, unit=" N")
+                if bounds[0] > bounds[1]:
+                    raise ValueError(f"{name} = {fmt(bounds)} N must be (lowest, highest) with lowest <= highest")
+                set_fields(self, **{name: tuple(float(b) for b in bounds)})
         if is_concrete_tree(self):
             self._check()
 
@@ -258,7 +296,7 @@ class GeneralRobot:
     # ---- reading a robot file -----------------------------------------------------------------
 
     @classmethod
-    def from_toml(cls, path: str | Path) -> GeneralRobot:
+    def from_toml(cls, path: str | Path) -> Robot:
         """Reads a robot file (docs/robot-file.md), SI units.
 
         Raises:
@@ -269,7 +307,7 @@ class GeneralRobot:
         return cls.from_table(read_toml(path, "robot file"), path)
 
     @classmethod
-    def from_table(cls, data: dict, path) -> GeneralRobot:
+    def from_table(cls, data: dict, path) -> Robot:
         """``from_dict`` of a robot file's table, its errors prefixed with the file's path."""
         try:
             return cls.from_dict(data)
@@ -277,7 +315,7 @@ class GeneralRobot:
             raise ValueError(f"robot file {path}: {e}") from e
 
     @classmethod
-    def from_dict(cls, data: dict) -> GeneralRobot:
+    def from_dict(cls, data: dict) -> Robot:
         """A robot from the parsed robot file (the TOML's tables as dicts); see ``from_toml``."""
         # a [rig] table (how the robot sits on its test rig) is read by ``rig.Rig.from_toml``
         _keys("the file", data, required=("length", "sections"), optional=("tendons", "tubes", "masses", "rig"))
@@ -350,11 +388,89 @@ class GeneralRobot:
         return len(self.tubes)
 
     def calibration_notes(self, tensions, tip_force) -> list[str]:
-        """None: a general robot carries no calibrated ranges (``Robot`` does)."""
-        return []
+        """Notes for concrete inputs outside the calibrated ranges (tensions [N], tip forces [N],
+        any leading axes); tracers, and a robot without calibrated ranges, give none."""
+        notes = []
+        magnitudes = None if not is_concrete(tip_force) else np.linalg.norm(np.asarray(tip_force, dtype=float), axis=-1)
+        for what, values, bounds in (
+            ("tensions", tensions, self.calibrated_tension),
+            ("tip force magnitudes", magnitudes, self.calibrated_tip_force),
+        ):
+            if bounds is None or values is None or not is_concrete(values) or np.size(values) == 0:
+                continue
+            lo, hi = bounds
+            v = np.asarray(values, dtype=float)
+            extreme = f"up to {v.max():.4g} N" if v.max() > hi else f"down to {v.min():.4g} N" if v.min() < lo else None
+            if extreme:
+                notes.append(
+                    f"{what} {extreme} are outside the range {interval(lo, hi)} N this robot was calibrated over: "
+                    "the model is not validated there (far above it, shapes may loop)"
+                )
+        return notes
 
     def warn_outside_calibration(self, tensions, tip_force) -> None:
-        """Nothing to warn about (see ``calibration_notes``)."""
+        """``calibration_notes`` as CalibrationWarnings, attributed to the caller's code."""
+        for note in self.calibration_notes(tensions, tip_force):
+            warn_user(note, CalibrationWarning)
+
+    def replace(self, values=None, /, **named) -> Robot:
+        """This robot with fields changed by name (fields.py): ``{"sections[0].E": 1e6}``,
+        ``{"tendons[*].offset": 7e-3}`` or keywords for top-level names (``length=0.2``). Values
+        may be traced (``jax.grad`` through them); concrete ones are checked as when built."""
+        return fields.replace(self, {**(values or {}), **named})
+
+    @classmethod
+    def paper(cls, **table_ii) -> Robot:
+        """The paper's TDCT robot: one silicone section with the tube channel and four tendon
+        channels, four straight tendons anchored at the tip (tendon 1 at body +y, then
+        counter-clockwise), one Nitinol tube (its depth: the actuation's insertion), calibrated
+        over 0-10 N of tension and 0-0.5 N of tip force.
+
+        Its values are Table II's (``PAPER``), any of them overridden by name: ``length``,
+        ``outer_diameter``, ``channel_diameter``, ``tendon_offset``, ``tendon_angles`` [rad],
+        ``tendon_channel_diameter``, ``E_silicone``, ``nu_silicone``, ``density_silicone``,
+        ``tube_outer_diameter``, ``tube_inner_diameter``, ``E_tube``, ``nu_tube``,
+        ``density_tube``, ``calibrated_tension``, ``calibrated_tip_force``. The paper gives neither
+        the tendon offset nor the silicone density: both are fitted (``paper.fit_load_capacities``,
+        Gauss-Newton on exact derivatives) to the ten load capacities of Sec. V.A. One offset
+        alone cannot match them (16% rms misfit); the pair leaves 5.7% rms. The fitted density is
+        above the 1130 kg/m^3 of Elastosil M4601: an effective one that also carries what the
+        model leaves out (tendons, sensor fibre, tip fixture). The tendon channel diameter is a
+        guess and the tube density a handbook value for Nitinol.
+        """
+        unknown = sorted(set(table_ii) - set(PAPER))
+        if unknown:
+            raise TypeError(f"Robot.paper: unknown value(s) {unknown}; allowed: {sorted(PAPER)}")
+        v = PAPER | table_ii
+        section = Section(
+            end=v["length"],
+            outer_diameter=v["outer_diameter"],
+            E=v["E_silicone"],
+            nu=v["nu_silicone"],
+            density=v["density_silicone"],
+            inner_diameter=v["channel_diameter"],
+            tendon_channel_diameter=v["tendon_channel_diameter"],
+        )
+        angles = v["tendon_angles"]
+        n = int(np.size(angles)) if is_concrete(angles) else int(np.shape(angles)[0])
+        if n == 0:
+            raise ValueError("tendon_angles must list at least one tendon, got an empty list")
+        angles = as_array("tendon_angles", angles, (n,)) if is_concrete(angles) else angles
+        tendons = tuple(Tendon(offset=v["tendon_offset"], angle=angles[i]) for i in range(n))
+        tube = Tube(v["tube_outer_diameter"], v["tube_inner_diameter"], v["E_tube"], v["nu_tube"], v["density_tube"])
+        return cls(v["length"], (section,), tendons, (tube,), (), v["calibrated_tension"], v["calibrated_tip_force"])
+
+    def __getattr__(self, name):
+        """The paper robot's former field names (``robot.E_silicone``): deprecated, warning once."""
+        if name in fields.PAPER_NAMES:
+            deprecated(f"robot.{name}", f"robot.replace / tdct.fields names: {fields.PAPER_NAMES[name]!r}")
+            return fields.get(self, fields.PAPER_NAMES[name])
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def to_general(self) -> Robot:
+        """This robot (deprecated: every robot is already the one description)."""
+        deprecated("Robot.to_general()", "the robot itself (Robot.paper() is already the one description)")
+        return self
 
 
 SECTION_KEYS = ("end", "outer_diameter", "E", "nu", "density")
@@ -429,24 +545,28 @@ def _build(cls, where: str, kw: dict):
         raise ValueError(str(e).replace(f"{cls.__name__}.", f"{where}.", 1)) from e
 
 
-def from_paper(robot) -> GeneralRobot:
-    """The paper's ``tdct.Robot`` as a GeneralRobot: one silicone section with the tube channel and
-    the tendon channels, its tendons anchored at the tip, its Nitinol tube (depth: the actuation's
-    insertion). Solved by ``tdct.solve``, it gives ``Robot``'s results (within 1e-12 relative)."""
-    section = Section(
-        end=robot.length,
-        outer_diameter=robot.outer_diameter,
-        E=robot.E_silicone,
-        nu=robot.nu_silicone,
-        density=robot.density_silicone,
-        inner_diameter=robot.channel_diameter,
-        tendon_channel_diameter=robot.tendon_channel_diameter,
-    )
-    angles = jnp.asarray(robot.tendon_angles) if not is_concrete(robot.tendon_angles) else np.asarray(robot.tendon_angles)
-    tendons = tuple(Tendon(offset=robot.tendon_offset, angle=angles[i]) for i in range(robot.n_tendons))
-    tube = Tube(robot.tube_outer_diameter, robot.tube_inner_diameter, robot.E_tube, robot.nu_tube, robot.density_tube)
-    return GeneralRobot(robot.length, (section,), tendons, (tube,))
+PAPER = dict(
+    length=0.160,
+    outer_diameter=0.020,
+    channel_diameter=1.5e-3,
+    tendon_offset=6.931e-3,
+    tendon_angles=(np.pi / 2, np.pi, 3 * np.pi / 2, 0.0),
+    tendon_channel_diameter=1.0e-3,
+    E_silicone=0.85e6,
+    nu_silicone=0.5,
+    density_silicone=1792.0,
+    tube_outer_diameter=1.397e-3,
+    tube_inner_diameter=1.118e-3,
+    E_tube=83e9,
+    nu_tube=0.33,
+    density_tube=6450.0,
+    calibrated_tension=(0.0, 10.0),
+    calibrated_tip_force=(0.0, 0.5),
+)
+"""The paper's robot (Table II) by name, SI units: ``Robot.paper()``'s values. ``tendon_offset``
+and ``density_silicone`` are fitted to the Sec. V.A load capacities (``Robot.paper``)."""
 
+Robot.ITEMS.update(sections=Section, tendons=Tendon, tubes=Tube, masses=PointMass)
 
 ROBOTS = Path(__file__).parent / "robots"
 """The example robot files shipped with the package: paper.toml, two_segment.toml."""

@@ -22,13 +22,11 @@ import numpy as np
 from . import status
 from .checks import as_array, check_integer, check_range
 from .data import Experiment
-from .description import GeneralRobot
-from .inputs import GeneralActuation, Loads
+from .description import Robot
+from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
 from .lm import covariance, levenberg_marquardt
-from .loads import STANDARD_GRAVITY, gravity_vector
 from .mechanics import positions_at
 from .options import DEFAULT_SOLVER, SolverOptions
-from .robot import Robot
 from .solve import solve, with_scene
 from .tree import pytree, set_fields
 
@@ -119,7 +117,7 @@ def _evaluate(x, robot, act, load, gravity, solver, measured, noise, axial):
 
 
 def estimate_force(
-    robot: Robot | GeneralRobot,
+    robot: Robot | Robot,
     measured: Experiment | TipPose,
     *,
     act=None,
@@ -140,7 +138,7 @@ def estimate_force(
         robot: the robot (a Robot is solved as ``robot.to_general()``).
         measured: a measured shape (an ``Experiment``: points at arc lengths along the body, with
             its actuation and known load) or a ``TipPose`` (then ``act`` and ``load`` are needed).
-        act: the known actuation for a ``TipPose`` (an Actuation or GeneralActuation).
+        act: the known actuation for a ``TipPose`` (an Actuation or Actuation).
         load: the known load for a ``TipPose`` (TipLoad, Loads or None).
         noise: the standard deviation of each measured coordinate [m], > 0.
         angle_noise: that of each component of the tip's rotation [rad], > 0 (``TipPose`` only).
@@ -167,7 +165,7 @@ def estimate_force(
     if axial_noise is not None:
         check_range("axial_noise", axial_noise, 0.0, lo_open=True, unit=" N")
     grid, max_steps = check_integer("grid", grid), check_integer("max_steps", max_steps)
-    general = robot if isinstance(robot, GeneralRobot) else robot.to_general()
+    general = robot if isinstance(robot, Robot) else robot.to_general()
     if isinstance(measured, Experiment):
         act, load = measured.act, measured.tip_load(gravity)
         n_data = 3 * int(np.count_nonzero(measured.weight))
@@ -177,7 +175,7 @@ def estimate_force(
         n_data = 6
     else:
         raise ValueError(f"measured must be a tdct.Experiment (a shape) or a TipPose, got {type(measured).__name__}")
-    act, load = GeneralActuation.of(act, general.n_tubes), Loads.of(load)
+    act, load = Actuation.of(act, general.n_tubes), Loads.of(load)
     if scene is not None:
         general, act, load = with_scene(general, act, load, scene, solver)
     L = float(general.length)
@@ -226,7 +224,7 @@ def estimate_force(
 
 
 def synthesize(
-    robot: Robot | GeneralRobot,
+    robot: Robot | Robot,
     act,
     s: float,
     magnitude: float,
@@ -251,8 +249,8 @@ def synthesize(
     Returns:
         The Experiment (with ``act`` and ``load``) and the force [N] (3,), world frame.
     """
-    general = robot if isinstance(robot, GeneralRobot) else robot.to_general()
-    act, load = GeneralActuation.of(act, general.n_tubes), Loads.of(load)
+    general = robot if isinstance(robot, Robot) else robot.to_general()
+    act, load = Actuation.of(act, general.n_tubes), Loads.of(load)
     L = float(general.length)
     F = np.zeros(3)
     for _ in range(sweeps):

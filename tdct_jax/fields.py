@@ -1,11 +1,16 @@
 """Robot fields by name: the scalars that sweeps vary, calibrations fit and ``--set`` changes.
 
-The paper's ``Robot`` names its scalar fields (``robot.SCALAR_FIELDS``: "E_silicone",
-"tendon_offset", ...). A ``GeneralRobot`` names ``length`` and the fields of its items by position,
-``sections[1].E``, ``tendons[0].offset``, ``tubes[0].E``, ``masses[2].mass``; ``[*]`` stands for
-every item of its kind with one shared value (``sections[*].E``: one modulus for the whole body,
-``tendons[*].stiffness``: one EA for every tendon), ``[a-b]`` for items a to b (``tendons[0-2].stiffness``:
-one EA for a segment's three tendons). SI units: tendon angles and twists in rad.
+A robot names ``length`` and the fields of its items by position, ``sections[1].E``,
+``tendons[0].offset``, ``tubes[0].E``, ``masses[2].mass``; ``[*]`` stands for every item of its
+kind with one shared value (``sections[*].E``: one modulus for the whole body,
+``tendons[*].stiffness``: one EA for every tendon), ``[a-b]`` for items a to b
+(``tendons[0-2].stiffness``: one EA for a segment's three tendons). Items count from 0 here, as
+in Python; tendons are numbered from 1 only where a person reads or types a tendon number (the
+CLI's ``--tendons``, sweep specs' column names). SI units: tendon angles and twists in rad (the
+robot file and ``tdct --set`` take degrees: ``angle_deg``, ``twist_deg_per_m``).
+
+The paper's robot formerly had names of its own (``E_silicone``, ``tendon_offset``, ...): they
+still resolve, to the names in ``PAPER_NAMES``, with a FutureWarning once each.
 """
 
 from __future__ import annotations
@@ -14,33 +19,51 @@ import dataclasses
 import re
 from collections.abc import Mapping
 
-from .description import GeneralRobot, PointMass, Section, Tendon, Tube
-from .robot import SCALAR_FIELDS, Robot
+from .checks import deprecated
 
-ITEMS = {"sections": Section, "tendons": Tendon, "tubes": Tube, "masses": PointMass}
-"""The item kinds of a GeneralRobot and their classes (every dataclass field is a scalar field)."""
-LINEAR = ("nu", "angle", "twist", "nu_silicone", "nu_tube")
+PAPER_NAMES = {
+    "outer_diameter": "sections[*].outer_diameter",
+    "channel_diameter": "sections[*].inner_diameter",
+    "tendon_offset": "tendons[*].offset",
+    "tendon_channel_diameter": "sections[*].tendon_channel_diameter",
+    "E_silicone": "sections[*].E",
+    "nu_silicone": "sections[*].nu",
+    "density_silicone": "sections[*].density",
+    "tube_outer_diameter": "tubes[0].outer_diameter",
+    "tube_inner_diameter": "tubes[0].inner_diameter",
+    "E_tube": "tubes[0].E",
+    "nu_tube": "tubes[0].nu",
+    "density_tube": "tubes[0].density",
+}
+"""The paper robot's former field names and the names they stand for now."""
+LINEAR = ("nu", "angle", "twist")
 """Field names whose values may be zero or negative; every other field is positive."""
 _NAME = re.compile(r"^(\w+)\[(\d+|\*|\d+-\d+)\]\.(\w+)$")
 
 
-def names(robot: Robot | GeneralRobot) -> tuple[str, ...]:
+def names(robot) -> tuple[str, ...]:
     """Every scalar field name of ``robot`` (without the ``[*]`` forms)."""
-    if isinstance(robot, Robot):
-        return SCALAR_FIELDS
     out = ["length"]
-    for kind, cls in ITEMS.items():
+    for kind, cls in robot.ITEMS.items():
         out += [f"{kind}[{i}].{f.name}" for i in range(len(getattr(robot, kind))) for f in dataclasses.fields(cls)]
     return tuple(out)
 
 
-def _parse(robot: Robot | GeneralRobot, name: str) -> tuple[str, tuple[int, ...], str] | None:
+def resolve(name: str) -> str:
+    """The field name ``name`` stands for: itself, or a former paper name's replacement (warning once)."""
+    if name in PAPER_NAMES:
+        deprecated(f"the field name {name!r}", repr(PAPER_NAMES[name]))
+        return PAPER_NAMES[name]
+    return name
+
+
+def _parse(robot, name: str) -> tuple[str, tuple[int, ...], str] | None:
     """(kind, item indices, field) of an item field's name; None for a top-level field. Raises
     ValueError, with the allowed names, for a name the robot does not have."""
-    if isinstance(robot, Robot) or name == "length":
-        if name in names(robot) or name == "length":
-            return None
-    elif (m := _NAME.match(name)) and m[1] in ITEMS and m[3] in {f.name for f in dataclasses.fields(ITEMS[m[1]])}:
+    if name == "length":
+        return None
+    items = robot.ITEMS
+    if (m := _NAME.match(resolve(name))) and m[1] in items and m[3] in {f.name for f in dataclasses.fields(items[m[1]])}:
         n = len(getattr(robot, m[1]))
         if m[2] == "*" and n:
             return m[1], tuple(range(n)), m[3]
@@ -48,16 +71,11 @@ def _parse(robot: Robot | GeneralRobot, name: str) -> tuple[str, tuple[int, ...]
         if m[2] != "*" and int(lo) <= int(hi or lo) < n:
             return m[1], tuple(range(int(lo), int(hi or lo) + 1)), m[3]
         raise ValueError(f"{name!r}: the robot has {n} {m[1]} (indices 0 to {n - 1}, or a range a-b with a <= b)")
-    kind = "Robot" if isinstance(robot, Robot) else "GeneralRobot"
-    if isinstance(robot, Robot):
-        allowed = ", ".join(SCALAR_FIELDS)
-    else:
-        items = (f"{k}[i, * or a-b].{{{', '.join(f.name for f in dataclasses.fields(c))}}}" for k, c in ITEMS.items())
-        allowed = ", ".join(["length", *items])
-    raise ValueError(f"{name!r} is not a scalar {kind} field; allowed: {allowed}")
+    kinds = (f"{k}[i, * or a-b].{{{', '.join(f.name for f in dataclasses.fields(c))}}}" for k, c in items.items())
+    raise ValueError(f"{name!r} is not a scalar robot field; allowed: {', '.join(['length', *kinds])}")
 
 
-def check(robot: Robot | GeneralRobot, name: str) -> None:
+def check(robot, name: str) -> None:
     """Raises ValueError unless ``name`` is one of the robot's fields (``[*]`` forms included)."""
     _parse(robot, name)
 
@@ -67,7 +85,7 @@ def is_linear(name: str) -> bool:
     return name.rsplit(".", 1)[-1] in LINEAR
 
 
-def get(robot: Robot | GeneralRobot, name: str):
+def get(robot, name: str):
     """The field's value as the robot holds it (a tracer inside jit); for ``[*]``, the first
     item's (``value`` checks that they all agree)."""
     where = _parse(robot, name)
@@ -77,7 +95,7 @@ def get(robot: Robot | GeneralRobot, name: str):
     return getattr(getattr(robot, kind)[index[0]], field)
 
 
-def value(robot: Robot | GeneralRobot, name: str) -> float:
+def value(robot, name: str) -> float:
     """The field's present value (for ``[*]``: the one value all items share).
 
     Raises:
@@ -97,16 +115,12 @@ def value(robot: Robot | GeneralRobot, name: str) -> float:
     return values[0]
 
 
-def replace(robot: Robot | GeneralRobot, values: Mapping[str, object]) -> Robot | GeneralRobot:
+def replace(robot, values: Mapping[str, object]):
     """The robot with the named fields set to ``values`` (concrete or traced; concrete values
     are checked as a user-built robot's are)."""
     if not values:
         return robot
-    if isinstance(robot, Robot):
-        for name in values:
-            _parse(robot, name)
-        return dataclasses.replace(robot, **values)
-    top, groups = {}, {kind: list(getattr(robot, kind)) for kind in ITEMS}
+    top, groups = {}, {kind: list(getattr(robot, kind)) for kind in robot.ITEMS}
     for name, v in values.items():
         where = _parse(robot, name)
         if where is None:
@@ -117,10 +131,13 @@ def replace(robot: Robot | GeneralRobot, values: Mapping[str, object]) -> Robot 
             try:
                 groups[kind][i] = dataclasses.replace(groups[kind][i], **{field: v})
             except ValueError as e:
-                raise ValueError(str(e).replace(f"{ITEMS[kind].__name__}.", f"{kind}[{i}].", 1)) from e
+                raise ValueError(str(e).replace(f"{robot.ITEMS[kind].__name__}.", f"{kind}[{i}].", 1)) from e
     changed = {
         kind: tuple(items)
         for kind, items in groups.items()
         if any(a is not b for a, b in zip(items, getattr(robot, kind), strict=True))
     }
+    if "length" in top and "sections" not in changed:  # the last section ends at the length
+        last = len(robot.sections) - 1
+        changed["sections"] = (*robot.sections[:last], dataclasses.replace(robot.sections[last], end=top["length"]))
     return dataclasses.replace(robot, **top, **changed)

@@ -1,4 +1,4 @@
-"""Shooting on a ``GeneralRobot``: breakpoints, intervals, the integration across them, the node
+"""Shooting on a ``Robot``: breakpoints, intervals, the integration across them, the node
 quantities (docs/model.md; issue 23).
 
 The state is segments.py's (p, R, N, M), N and M the *total* force and moment of rod plus tendons.
@@ -38,10 +38,10 @@ from jax import lax
 
 from . import contact
 from .checks import check_range, is_concrete
-from .description import GeneralRobot, channelled_second_moments, is_concrete_tree, section_area
-from .inputs import GeneralActuation, Loads
+from .description import Robot, channelled_second_moments, is_concrete_tree, section_area
+from .inputs import Actuation, Loads
 from .integrate import coupled, rk4
-from .segments import E3, Segment, State, carried, rod_force, strains, strains_at, tendon_pb, uncarried
+from .segments import E3, Segment, State, carried, paper_transition, printed_moment, rod_force, strains, strains_at, tendon_pb, uncarried
 
 
 class Interval(NamedTuple):
@@ -61,16 +61,18 @@ class Interval(NamedTuple):
 
 
 class Plan(NamedTuple):
-    """The integration plan: sorted breakpoints b (K + 1,), the intervals' parameters (K, ...), and
-    the jump (dN, dM) applied at each breakpoint (K + 1, 3) each."""
+    """The integration plan: sorted breakpoints b (K + 1,), the intervals' parameters (K, ...), the
+    jump (dN, dM) applied at each breakpoint (K + 1, 3) each, and the index of the interval that
+    starts where the first tube ends (the paper's transition applies there; -1 without a tube)."""
 
     b: jax.Array
     intervals: Interval
     dN: jax.Array
     dM: jax.Array
+    tube_end: jax.Array
 
 
-def _tendon_fields(robot: GeneralRobot):
+def _tendon_fields(robot: Robot):
     """Stacked tendon routing: offsets, base angles, twist rates, (n_t,) each."""
     if not robot.tendons:
         return [jnp.zeros(0)] * 3
@@ -80,12 +82,12 @@ def _tendon_fields(robot: GeneralRobot):
     ]
 
 
-def is_helical(robot: GeneralRobot) -> bool:
+def is_helical(robot: Robot) -> bool:
     """Some tendon has a twist rate (static): r_t depends on s."""
     return any(t.twist is not None for t in robot.tendons)
 
 
-def tendon_positions(robot: GeneralRobot, s):
+def tendon_positions(robot: Robot, s):
     """r_t(s) and r_t'(s) of every tendon, body frame, (n_t, 3) each (Tendon.position); r_t' is
     None for a robot without helical tendons."""
     offset, angle, twist = _tendon_fields(robot)
@@ -99,17 +101,17 @@ def tendon_positions(robot: GeneralRobot, s):
     return r, dr
 
 
-def _anchors(robot: GeneralRobot):
+def _anchors(robot: Robot):
     """Anchor arc lengths (n_t,), the tip's for tendons anchored there."""
     return jnp.stack([robot.length if t.end is None else t.end for t in robot.tendons]) if robot.tendons else jnp.zeros(0)
 
 
-def _section_ends(robot: GeneralRobot):
+def _section_ends(robot: Robot):
     """Interior section ends (n_sections - 1,): the last section ends at ``robot.length``."""
     return jnp.stack([s.end for s in robot.sections[:-1]]) if len(robot.sections) > 1 else jnp.zeros(0)
 
 
-def interval_parameters(robot: GeneralRobot, act: GeneralActuation, k, rank: Ranks, s):
+def interval_parameters(robot: Robot, act: Actuation, k, rank: Ranks, s):
     """K_se (3,), K_bt (3,), linear density, backbone flag and masked tensions of interval k
     (eqs. 6-7, 14-16, 29-30). Which section, tubes and tendons it holds follows from the sorted
     order of the breakpoints (``rank``: each breakpoint's position), not from comparing arc
@@ -154,7 +156,7 @@ class Ranks(NamedTuple):
     anchors: jax.Array
 
 
-def _point_loads(robot: GeneralRobot, load: Loads, gravity):
+def _point_loads(robot: Robot, load: Loads, gravity):
     """Arc lengths (k,) and world force (k, 3) and moment (k, 3) of the point loads and masses."""
     s = [jnp.asarray(load.point_s, float)]
     F = [jnp.reshape(jnp.asarray(load.point_force, float), (-1, 3))]
@@ -167,7 +169,7 @@ def _point_loads(robot: GeneralRobot, load: Loads, gravity):
     return jnp.concatenate(s), jnp.concatenate(F), jnp.concatenate(C)
 
 
-def plan(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity) -> Plan:
+def plan(robot: Robot, act: Actuation, load: Loads, gravity) -> Plan:
     """Breakpoints, sorted, with each interval's parameters and each breakpoint's jump.
 
     The unsorted breakpoints are, in this order: the base, the interior section ends, the tube
@@ -200,11 +202,12 @@ def plan(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity) -> Pl
     k = jnp.arange(n - 1)
     mid = (b[:-1] + b[1:]) / 2
     intervals = jax.vmap(lambda k, s: interval_parameters(robot, act, k, ranks, s))(k, mid)
-    return Plan(b, intervals, dN_all[order], dM_all[order])
+    tube_end = ranks.tubes[0] if robot.tubes else jnp.asarray(-1, rank.dtype)
+    return Plan(b, intervals, dN_all[order], dM_all[order], tube_end)
 
 
-def force_scale(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity):
-    """A typical force F_c [N] (shooting.force_scale for a GeneralRobot): tensions, tip load,
+def force_scale(robot: Robot, act: Actuation, load: Loads, gravity):
+    """A typical force F_c [N] (shooting.force_scale for a Robot): tensions, tip load,
     weight, point loads and distributed force. A constant for differentiation."""
     robot, act, load, gravity = lax.stop_gradient((robot, act, load, gravity))
     L = robot.length
@@ -214,7 +217,7 @@ def force_scale(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity
     return jnp.maximum(F + jnp.linalg.norm(load.distributed_force) * L, 1e-3)
 
 
-def _mass_moments(robot: GeneralRobot, act: GeneralActuation):
+def _mass_moments(robot: Robot, act: Actuation):
     """Total mass [kg] and twice its first moment about the base along the straight rod [kg m]:
     sections, tubes to their depths, point masses."""
     starts = [0.0, *(s.end for s in robot.sections[:-1])]
@@ -231,7 +234,7 @@ def _mass_moments(robot: GeneralRobot, act: GeneralActuation):
     return m0, m1
 
 
-def straight_rod(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, F_c, steps: int | None = None):
+def straight_rod(robot: Robot, act: Actuation, load: Loads, gravity, F_c, steps: int | None = None):
     """Scaled base unknowns of the straight rod: every load's resultant exactly, its moment about
     the base to first order (the moment arms of the undeformed robot); with a scene (``steps``,
     RK4 steps per breakpoint interval, given) the contact forces follow, all zero."""
@@ -248,9 +251,9 @@ def straight_rod(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravit
     return jnp.concatenate([N0 / F_c, M0 / (F_c * L), guesses / F_c, forces])
 
 
-def _segment(robot: GeneralRobot, P: Interval, s) -> Segment:
+def _segment(robot: Robot, P: Interval, s, tilt: bool = True) -> Segment:
     r, dr = tendon_positions(robot, s)
-    return Segment(P.K_se, P.K_bt, P.rho, P.tau, r, P.backbone, True, dr)
+    return Segment(P.K_se, P.K_bt, P.rho, P.tau, r, P.backbone, tilt, dr)
 
 
 class Carry(NamedTuple):
@@ -263,13 +266,13 @@ class Carry(NamedTuple):
     l: jax.Array | None = None
 
 
-def rest_lengths(robot: GeneralRobot):
+def rest_lengths(robot: Robot):
     """Each tendon's length from the base to its anchor in the straight, unloaded robot [m], (n_t,)."""
     offset, _, twist = _tendon_fields(robot)
     return _anchors(robot) * jnp.sqrt(1 + (offset * twist) ** 2)
 
 
-def displacements(robot: GeneralRobot, act: GeneralActuation, lengths):
+def displacements(robot: Robot, act: Actuation, lengths):
     """What each tendon's encoder reads [m]: its rest length inside the robot less its present
     rest length there, l / (1 + tau / EA) (l: its length along the shape), (n_t,)."""
     EA = [jnp.inf if t.stiffness is None else t.stiffness for t in robot.tendons]
@@ -277,40 +280,43 @@ def displacements(robot: GeneralRobot, act: GeneralActuation, lengths):
     return rest_lengths(robot) - lengths / stretch
 
 
-def with_driven(act: GeneralActuation, x, F_c) -> GeneralActuation:
+def with_driven(act: Actuation, x, F_c) -> Actuation:
     """The actuation with the displacement-driven tendons' tensions taken from the unknowns x[6:6 + n_d]."""
     if not act.driven:
         return act
     tensions = jnp.asarray(act.tensions, float).at[np.asarray(act.driven)].set(x[6 : 6 + len(act.driven)] * F_c)
-    return GeneralActuation._rebuild(tensions, act.insertions, act.displacements, act.driven)
+    return Actuation._rebuild(tensions, act.insertions, act.displacements, act.driven)
 
 
 class Pieces(NamedTuple):
     """Consecutive RK4 pieces of equal step count (``pieces``): each one's segment parameters, arc
-    length at its start s0, step length h and the jump (dN, dM) applied at its start, (..., 3)."""
+    length at its start s0, step length h, the jump (dN, dM) applied at its start, (..., 3), and
+    the index of its breakpoint interval with whether it is that interval's first piece."""
 
     P: Interval
     s0: jax.Array
     h: jax.Array
     dN: jax.Array
     dM: jax.Array
+    k: jax.Array
+    lead: jax.Array
 
 
-def n_intervals(robot: GeneralRobot, load: Loads) -> int:
+def n_intervals(robot: Robot, load: Loads) -> int:
     """The number of breakpoint intervals of ``plan`` (static): one more than the interior
     section ends, tubes, anchors not at the tip, point loads and point masses."""
     anchored = sum(t.end is not None for t in robot.tendons)
     return len(robot.sections) + robot.n_tubes + anchored + load.n_points + len(robot.masses)
 
 
-def check_intervals(robot: GeneralRobot, load: Loads, solver) -> None:
+def check_intervals(robot: Robot, load: Loads, solver) -> None:
     """Raises unless the shooting intervals K divide the P steps RK4 steps (P: ``n_intervals``),
     naming ``intervals``, its value and the allowed values."""
     P, n, K = n_intervals(robot, load), solver.steps, solver.intervals
     if (P * n) % K:
         allowed = [k for k in range(1, P * n + 1) if (P * n) % k == 0]
         raise ValueError(
-            f"intervals = {K}: a GeneralRobot with {P} breakpoint intervals of steps = {n} RK4 steps each is split into "
+            f"intervals = {K}: a Robot with {P} breakpoint intervals of steps = {n} RK4 steps each is split into "
             f"K intervals of equal step count, so K must divide {P} x {n} = {P * n}: one of {allowed} "
             f"(every breakpoint an interval boundary for K = {P} q, q dividing {n})"
         )
@@ -338,12 +344,23 @@ def pieces(pl: Plan, steps: int, K: int, every: int | None = None) -> tuple[Piec
         jnp.repeat(h, per),
         jump(pl.dN),
         jump(pl.dM),
+        np.repeat(np.arange(P), per),
+        np.tile(np.arange(per) == 0, P),
     )
     return jax.tree.map(lambda a: a.reshape(K, c // g, *a.shape[1:]), ps), int(g)
 
 
 def integrate(
-    robot: GeneralRobot, load: Loads, gravity, ps: Pieces, c: Carry, steps: int, path: bool = False, forces=None, rotation=None
+    robot: Robot,
+    load: Loads,
+    gravity,
+    ps: Pieces,
+    c: Carry,
+    steps: int,
+    path: bool = False,
+    forces=None,
+    rotation=None,
+    paper: Paper | None = None,
 ):
     """RK4 over consecutive pieces of ``steps`` steps (``pieces``, one shooting interval), each
     after its jump, from the Carry c; tendon lengths where c.l is not None, arc length for helical
@@ -353,18 +370,30 @@ def integrate(
     ``forces``: each piece's contact forces against ``load.scene``'s obstacles [N], (pieces,
     n_o), or None (no contact): at its start the piece's N jumps by the point force -sum_o
     lambda_o n_o(p) (contact.py), and the nodes come with each piece start's Starts (position and
-    gaps to the obstacles). ``rotation``: ``SolverOptions.rotation``."""
+    gaps to the obstacles). ``rotation``: ``SolverOptions.rotation``. ``paper``: the paper's
+    printed variants (``Paper``), None for neither."""
     helical, lengths = is_helical(robot), c.l is not None
     f_d = load.distributed_force
     r_fixed = None if helical else tendon_positions(robot, 0.0)[0]
+    printed = paper is not None and paper.tendons
+
+    def segment(P: Interval, s, tilt: bool = True) -> Segment:
+        return _segment(robot, P, s, tilt) if helical else Segment(P.K_se, P.K_bt, P.rho, P.tau, r_fixed, P.backbone, tilt)
 
     def field(P: Interval):
-        def f(_, c: Carry) -> Carry:
-            y = c.y
-            seg = _segment(robot, P, c.s) if helical else Segment(P.K_se, P.K_bt, P.rho, P.tau, r_fixed, P.backbone)
+        def rate(seg: Segment, y):
             v, u = strains_at(seg, y)
             dp = y.world(v)
-            dy = y.rate(dp, u, -P.rho * gravity - f_d, -jnp.cross(dp, y.N))
+            dM = -jnp.cross(dp, y.N)
+            if not seg.tilt:
+                dM = dM - y.world(printed_moment(seg, u))
+            return y.rate(dp, u, -P.rho * gravity - f_d, dM), v, u
+
+        def f(_, c: Carry) -> Carry:
+            seg = segment(P, c.s)
+            dy, v, u = rate(seg, c.y)
+            if printed:  # the printed tendon model where a tube is inside
+                dy, v, u = jax.tree.map(lambda a, b: jnp.where(P.backbone > 0, a, b), rate(segment(P, c.s, False), c.y), (dy, v, u))
             dl = None
             if lengths:
                 dl = P.present * jnp.linalg.norm(tendon_pb(seg, v, u), axis=-1)
@@ -375,9 +404,20 @@ def integrate(
     def project(c: Carry) -> Carry:
         return c._replace(y=c.y.orthonormalized())
 
+    def transition(k: Pieces, y: State) -> State:
+        """Eqs. 31-36 as printed at the first tube's end, strictly inside the robot."""
+        pl = paper.plan
+        d = pl.b[jnp.maximum(pl.tube_end, 0)]
+        here = k.lead & (k.k == pl.tube_end) & (d > 0) & (d < pl.b[-1])
+        before = jax.tree.map(lambda a: a[jnp.maximum(k.k - 1, 0)], pl.intervals)
+        jumped = paper_transition(segment(before, k.s0, not paper.tendons), segment(k.P, k.s0), y)
+        return jax.tree.map(lambda a, b: jnp.where(here, a, b), jumped, y)
+
     def piece(c: Carry, kf):
         k, f = kf
         y = c.y._replace(N=c.y.N + k.dN, M=c.y.M + k.dM)
+        if paper is not None and paper.plan is not None:
+            y = transition(k, y)
         starts = None
         if f is not None:
             F, starts = contact.at_start(load.scene, f, y.p, k.P.radius)
@@ -390,6 +430,21 @@ def integrate(
     return lax.scan(piece, coupled(c._replace(s=None), ps, forces), (ps, forces))
 
 
+class Paper(NamedTuple):
+    """The paper's printed variants (``SolverOptions``): ``tendons`` (static), its tendon model
+    (eqs. 21-22: tangents e3) where a tube is inside; ``plan``, the Plan whose first tube's end
+    takes its transition (eqs. 31-36), or None for the balanced one."""
+
+    tendons: bool
+    plan: Plan | None
+
+
+def paper_variants(solver, pl: Plan) -> Paper | None:
+    """The ``Paper`` variants ``solver`` asks for on the plan ``pl``; None for the defaults."""
+    tendons, transition = solver.tendon_model == "paper", solver.transition == "paper"
+    return Paper(tendons, pl if transition else None) if tendons or transition else None
+
+
 def by_interval(a, P: int):
     """Nodes of consecutive pieces (pieces, g + 1, ...), P breakpoint intervals' worth, as
     (P, steps + 1, ...): each interval's first node after its breakpoint's jump, each later
@@ -399,7 +454,7 @@ def by_interval(a, P: int):
     return jnp.concatenate([a[:, 0], rest.reshape(P, rest.shape[1] * rest.shape[2], *a.shape[3:])], 1)
 
 
-def closing(robot: GeneralRobot, act: GeneralActuation, load: Loads, pl: Plan, y: State, lengths, F_c, touch=None, mu=0.0):
+def closing(robot: Robot, act: Actuation, load: Loads, pl: Plan, y: State, lengths, F_c, touch=None, mu=0.0):
     """The scaled residual at the tip State y (before the jump at L) with the tendons' lengths:
     tip (6,), then per driven tendon phi(tau / F_c, (delta_shape - delta) / L) (``shoot``), then
     with a scene (``touch``: contact.Candidates, the last one the tip's, whose force is applied
@@ -422,7 +477,7 @@ def closing(robot: GeneralRobot, act: GeneralActuation, load: Loads, pl: Plan, y
     return jnp.concatenate(res), slack
 
 
-def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solver, x, F_c, path: bool = False, mu=0.0):
+def shoot(robot: Robot, act: Actuation, load: Loads, gravity, solver, x, F_c, path: bool = False, mu=0.0):
     """Integrates every interval from the scaled unknowns x to the tip: x[:6] the base wrench
     (N(0), M(0)), x[6:6 + n_d] the tensions of the displacement-driven tendons (act.driven) over
     F_c, then with ``load.scene`` the contact forces lambda / F_c, candidate by candidate, each
@@ -451,7 +506,7 @@ def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solv
         where = contact.interior_pieces(P, solver.steps, g, scene.every)
         lam = x[6 + n_d :].reshape(-1, scene.n_obstacles) * F_c
         forces = jnp.zeros((ps.h.size, scene.n_obstacles)).at[where].set(lam[:-1])
-    end, out = integrate(robot, load, gravity, ps, Carry(y0, None, l0), g, path, forces, solver.rotation)
+    end, out = integrate(robot, load, gravity, ps, Carry(y0, None, l0), g, path, forces, solver.rotation, paper_variants(solver, pl))
     nodes, starts = (out, None) if scene is None else out
     if scene is not None:
         # a candidate inside a zero-length interval shares its point with the next one: off
@@ -469,9 +524,9 @@ def shoot(robot: GeneralRobot, act: GeneralActuation, load: Loads, gravity, solv
     return res, (nodes, pl, act, end.l, slack, found)
 
 
-def node_quantities(robot: GeneralRobot, act, load, gravity, nodes, pl: Plan):
+def node_quantities(robot: Robot, act, load, gravity, nodes, pl: Plan, tendon_model: str = "exact"):
     """Flattened node arc lengths, States, strains v, u and rod force n, m, each node by its own
-    interval's segment parameters."""
+    interval's segment parameters (``tendon_model`` "paper": the printed one where a tube is inside)."""
     ys, P = nodes.y, pl.intervals
     K, m = pl.b.size - 1, jnp.shape(ys.p)[1]
     # node arc lengths on the exact grid (the ones carried in the state differ in the last bit),
@@ -483,20 +538,25 @@ def node_quantities(robot: GeneralRobot, act, load, gravity, nodes, pl: Plan):
 
     def one(args):
         y, P, s = args
-        seg = _segment(robot, P, s)
-        v, u = strains(seg, y.R, y.N, y.M)
-        return (v, u, *rod_force(seg, y, v, u))
+
+        def at(seg: Segment):
+            v, u = strains(seg, y.R, y.N, y.M)
+            return (v, u, *rod_force(seg, y, v, u))
+
+        if tendon_model == "paper":
+            return jax.tree.map(lambda a, b: jnp.where(P.backbone > 0, a, b), at(_segment(robot, P, s, False)), at(_segment(robot, P, s)))
+        return at(_segment(robot, P, s))
 
     # lax.map, not vmap: see solve._assemble
     return s.reshape(-1), flat, lax.map(one, (flat, P_nodes, s.reshape(-1)))
 
 
-def check_arguments(robot: GeneralRobot, act: GeneralActuation, load: Loads, solver) -> None:
+def check_arguments(robot: Robot, act: Actuation, load: Loads, solver) -> None:
     """Counts and ranges that need robot and inputs together (ValueError naming field and range)."""
-    if solver.transition != "balanced" or solver.tendon_model != "exact":
+    if (solver.transition != "balanced" or solver.tendon_model != "exact") and not robot.tubes:
         raise ValueError(
-            f"solver transition = {solver.transition!r}, tendon_model = {solver.tendon_model!r}: a GeneralRobot is solved "
-            "with the 'balanced' transition and the 'exact' tendon model only (the paper's variants: tdct.Robot)"
+            f"solver transition = {solver.transition!r}, tendon_model = {solver.tendon_model!r}: the paper's variants act "
+            "where a tube is inside and at its end; this robot has no tube (use 'balanced' and 'exact')"
         )
     n_t, n_tubes = robot.n_tendons, robot.n_tubes
     if any(i >= n_t for i in act.driven):

@@ -1,8 +1,8 @@
-"""What is done to a ``GeneralRobot``: tendon tensions and tube insertions (``GeneralActuation``),
-and dead loads along the body (``Loads``), all world-frame, all differentiable leaves.
+"""What is done to a robot: tendon tensions and displacements with tube insertions
+(``Actuation``), dead loads at the tip and along the body (``Loads``), and gravity; all world
+frame, all differentiable leaves, leading batch axes allowed where a field says so.
 
-``TipLoad`` (loads.py) stays the shorthand for a tip force and moment; ``Loads.of`` turns one
-into a ``Loads``. Gravity stays the solver's ``gravity=`` argument, a vector in any direction.
+Gravity stays the solver's ``gravity=`` argument, a vector in any direction.
 """
 
 from __future__ import annotations
@@ -10,28 +10,43 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from .checks import as_array, check_range, is_concrete
-from .loads import Actuation, TipLoad
+from .checks import UnitWarning, as_array, check_range, deprecated, is_concrete, plausibility_note, warn_user
 from .scene import Scene
 from .tree import pytree, set_fields, static, unchecked
 
+STANDARD_GRAVITY = (0.0, -9.81, 0.0)
+"""World gravity [m/s^2]: the robot is mounted horizontally, gravity along -y."""
+
+
+class _Insertion(type):
+    """``Actuation(..., insertion=d)``, the former paper robot's one tube: ``insertions``, with a
+    FutureWarning once."""
+
+    def __call__(cls, *args, **kwargs):
+        if "insertion" in kwargs:
+            deprecated("Actuation(insertion=...)", "Actuation(tensions, insertions) (a number for one tube)")
+            kwargs["insertions"] = kwargs.pop("insertion")
+        return super().__call__(*args, **kwargs)
+
 
 @pytree
-class GeneralActuation:
-    """Joint-space inputs of a GeneralRobot (one configuration): each tendon driven by its tension
-    or, for those listed in ``driven``, by its displacement (the length pulled at the base, what
-    its encoder reads); mixed control is allowed.
+class Actuation(metaclass=_Insertion):
+    """Joint-space inputs: each tendon driven by its tension or, for those listed in ``driven``,
+    by its displacement (the length pulled at the base, what its encoder reads); mixed control is
+    allowed. Leading batch axes are allowed on tensions and insertions (a stack of samples).
 
     Attributes:
-        tensions: tension of each tendon [N], shape (n_tendons,), in the robot's tendon order;
-            for a displacement-driven tendon, the start of the search (0 is fine).
-        insertions: depth of each tube from the base [m], shape (n_tubes,), in [0, L].
+        tensions: tension of each tendon [N], shape (..., n_tendons), tendon 1 first; for a
+            displacement-driven tendon, the start of the search (0 is fine). Empty (the default):
+            zero on every tendon of the robot it is applied to.
+        insertions: depth of each tube from the base [m], shape (..., n_tubes), in [0, L]; a
+            number for a robot with one tube. Empty (the default): every tube withdrawn.
         displacements: the commanded displacement of each driven tendon [m], shape (len(driven),):
             its rest length inside the straight robot less its present rest length there (so
             positive when pulled). Its tension is found so that the shape matches; where that
             would take a negative tension the tendon goes slack (tension exactly 0,
-            ``GeneralSolution.slack``).
-        driven: indices of the displacement-driven tendons (static).
+            ``Solution.slack``).
+        driven: indices of the displacement-driven tendons, 0 for tendon 1 (static).
     """
 
     tensions: object = ()
@@ -40,46 +55,59 @@ class GeneralActuation:
     driven: tuple = static(default=())
 
     def __post_init__(self):
-        tensions = as_array("tensions", self.tensions, (np.size(self.tensions),) if is_concrete(self.tensions) else None)
+        tensions = self.tensions
+        if is_concrete(tensions) and np.ndim(tensions) == 0:
+            tensions = (tensions,)
+        tensions = as_array("tensions", tensions, trailing=(np.shape(tensions)[-1],) if is_concrete(tensions) else None)
         check_range("tensions", tensions, 0.0, unit=" N")
-        driven = tuple(int(i) for i in self.driven)
-        if len(set(driven)) != len(driven) or any(i < 0 for i in driven):
-            raise ValueError(f"driven = {self.driven!r}: distinct tendon indices (0 for the first tendon) expected")
-        k = len(driven)
-        displacements = as_array(
-            "displacements", self.displacements, (k,) if is_concrete(self.displacements) else None, unit=" m"
-        )
-        set_fields(self, driven=driven, displacements=displacements)
+        insertions = self.insertions
+        if np.ndim(insertions) == 0 or np.ndim(insertions) == np.ndim(tensions) - 1 > 0:
+            insertions = (np if is_concrete(insertions) else jnp).asarray(insertions, dtype=float)[..., None]  # one tube
         insertions = as_array(
-            "insertions", self.insertions, (np.size(self.insertions),) if is_concrete(self.insertions) else None
+            "insertions", insertions, trailing=(np.shape(insertions)[-1],) if is_concrete(insertions) else None, unit=" m"
         )
         check_range("insertions", insertions, 0.0, unit=" m")
-        set_fields(self, tensions=tensions, insertions=insertions)
+        if is_concrete(tensions) and is_concrete(insertions) and np.size(tensions) and np.size(insertions):
+            ta, ia = np.shape(tensions)[:-1], np.shape(insertions)[:-1]
+            if ta != ia:
+                raise ValueError(
+                    f"tensions has shape {np.shape(tensions)} and insertions {np.shape(insertions)}: their leading (batch) "
+                    f"axes {ta} and {ia} must be the same (one configuration: no batch axes)"
+                )
+        driven = tuple(int(i) for i in self.driven)
+        if len(set(driven)) != len(driven) or any(i < 0 for i in driven):
+            raise ValueError(f"driven = {self.driven!r}: distinct tendon indices (0 for tendon 1) expected")
+        k = len(driven)
+        displacements = as_array("displacements", self.displacements, (k,) if is_concrete(self.displacements) else None, unit=" m")
+        set_fields(self, tensions=tensions, insertions=insertions, displacements=displacements, driven=driven)
+
+    @property
+    def insertion(self):
+        """The first tube's depth [m], shape (...): the insertion of a robot with one tube."""
+        return self.insertions[..., 0]
 
     @classmethod
-    def of(cls, act, n_tubes: int) -> GeneralActuation:
-        """A GeneralActuation from itself, None (nothing actuated) or a ``tdct.Actuation`` (its
-        scalar ``insertion`` is the one tube's depth, or ignored when it is 0 and there are none)."""
-        if act is None:
-            return cls()
-        if isinstance(act, cls):
+    def of(cls, act, robot) -> Actuation:
+        """``act`` for ``robot``: None, or empty tensions or insertions, are zeros of the robot's
+        counts."""
+        act = cls() if act is None else act
+        if not isinstance(act, cls):
+            raise TypeError(f"act must be a tdct.Actuation, got {type(act).__name__}")
+        tensions, insertions = act.tensions, act.insertions
+        if np.shape(tensions)[-1:] == (0,) and robot.n_tendons:
+            tensions = np.zeros(np.shape(tensions)[:-1] + (robot.n_tendons,))
+        if np.shape(insertions)[-1:] == (0,) and robot.n_tubes:
+            insertions = np.zeros(np.shape(insertions)[:-1] + (robot.n_tubes,))
+        if tensions is act.tensions and insertions is act.insertions:
             return act
-        if isinstance(act, Actuation):
-            if n_tubes == 1:
-                return cls(act.tensions, jnp.reshape(act.insertion, (1,)) if not is_concrete(act.insertion) else [act.insertion])
-            if n_tubes == 0 and is_concrete(act.insertion) and float(act.insertion) == 0.0:
-                return cls(act.tensions, ())
-            raise ValueError(
-                f"a tdct.Actuation carries one insertion, the robot has {n_tubes} tubes: use tdct.GeneralActuation(tensions, insertions)"
-            )
-        raise TypeError(f"act must be a tdct.GeneralActuation or tdct.Actuation, got {type(act).__name__}")
+        return cls._rebuild(tensions, insertions, act.displacements, act.driven)
 
     @classmethod
-    def _rebuild(cls, tensions, insertions, displacements, driven) -> GeneralActuation:
+    def _rebuild(cls, tensions, insertions, displacements, driven) -> Actuation:
         """Built without the checks (inside the solver, from traced values; stacks)."""
         return unchecked(cls, tensions=tensions, insertions=insertions, displacements=displacements, driven=driven)
 
-    def scaled(self, lam) -> GeneralActuation:
+    def scaled(self, lam) -> Actuation:
         """Tensions and displacements times lam (the solver's load continuation)."""
         return self._rebuild(lam * self.tensions, self.insertions, lam * self.displacements, self.driven)
 
@@ -89,8 +117,8 @@ class Loads:
     """Dead loads on the robot, world frame.
 
     Attributes:
-        tip_force: F_e at s = L [N], (3,).
-        tip_moment: M_e at s = L [N m], (3,).
+        tip_force: F_e at s = L [N], (..., 3): leading batch axes allowed.
+        tip_moment: M_e at s = L [N m], (..., 3).
         point_s: arc lengths of the point loads [m], (k,), in [0, L].
         point_force: their forces [N], (k, 3).
         point_moment: their moments [N m], (k, 3).
@@ -98,7 +126,7 @@ class Loads:
             the weight).
         scene: the obstacles the robot may touch (a ``tdct.Scene``), or None: a pytree child, so
             the solve's implicit derivatives, ``vmap`` and sweeps reach the obstacles' numbers.
-            Not scaled by the load continuation (issue 26; contact.py).
+            Not scaled by the load continuation (contact.py). ``solve(..., scene=)`` puts it here.
     """
 
     tip_force: object = (0.0, 0.0, 0.0)
@@ -121,43 +149,97 @@ class Loads:
             if x is None and k is not None:
                 x = np.zeros((k, 3))
             values[name] = as_array(name, x, (k, 3) if k is not None and is_concrete(x) else None)
-        for name in ("tip_force", "tip_moment", "distributed_force"):
-            values[name] = as_array(name, getattr(self, name), (3,))
+        for name in ("tip_force", "tip_moment"):
+            values[name] = as_array(name, getattr(self, name), trailing=(3,))
+        force, moment = values["tip_force"], values["tip_moment"]
+        if is_concrete(force) and is_concrete(moment) and np.shape(force) != np.shape(moment):
+            raise ValueError(
+                f"tip_force has shape {np.shape(force)} and tip_moment {np.shape(moment)}: their leading (batch) axes must "
+                "be the same (one configuration: no batch axes)"
+            )
+        values["distributed_force"] = as_array("distributed_force", self.distributed_force, (3,))
         set_fields(self, point_s=point_s, **values)
+
+    @classmethod
+    def from_mass(cls, mass, gravity=STANDARD_GRAVITY) -> Loads:
+        """The weight of a tip mass [kg] (shape (...) for a batch) under ``gravity`` [m/s^2]."""
+        mass = as_array("mass", mass)
+        check_range("mass", mass, 0.0, unit=" kg")
+        g = gravity_vector(gravity)
+        concrete = is_concrete(mass) and is_concrete(g)
+        force = np.multiply.outer(mass, g) if concrete else jnp.einsum("...,i->...i", mass, g)
+        return cls(tip_force=force, tip_moment=np.zeros(np.shape(force)))
 
     @property
     def n_points(self) -> int:
         return int(np.shape(self.point_s)[0])
 
+    @property
+    def force(self):
+        """The tip force (deprecated name: ``tip_force``)."""
+        deprecated("load.force", "load.tip_force")
+        return self.tip_force
+
+    @property
+    def moment(self):
+        """The tip moment (deprecated name: ``tip_moment``)."""
+        deprecated("load.moment", "load.tip_moment")
+        return self.tip_moment
+
     @classmethod
     def of(cls, load) -> Loads:
-        """A Loads from itself, None (no load) or a ``TipLoad`` (its tip force and moment)."""
+        """A Loads from itself or None (no load)."""
         if load is None:
             return cls()
         if isinstance(load, cls):
             return load
-        if isinstance(load, TipLoad):
-            return cls(tip_force=load.force, tip_moment=load.moment)
-        raise TypeError(f"load must be a tdct.Loads or tdct.TipLoad, got {type(load).__name__}")
+        raise TypeError(f"load must be a tdct.Loads, got {type(load).__name__}")
+
+    def _with(self, **changes) -> Loads:
+        fields = {name: getattr(self, name) for name in self.__dataclass_fields__}
+        return unchecked(Loads, **(fields | changes))
 
     def with_scene(self, scene) -> Loads:
         """The same loads with the obstacles ``scene`` (a checked Scene, or None)."""
-        fields = {name: getattr(self, name) for name in self.__dataclass_fields__}
-        return unchecked(Loads, **(fields | dict(scene=scene)))
+        return self._with(scene=scene)
 
     def with_point(self, s, force, moment=None) -> Loads:
         """These loads with one more point load: force [N] (3,) and moment [N m] (3,), default
         none, at arc length s [m] (values may be traced)."""
         moment = jnp.zeros(3) if moment is None else moment
-        fields = {name: getattr(self, name) for name in self.__dataclass_fields__}
-        point = dict(
+        return self._with(
             point_s=jnp.append(jnp.asarray(self.point_s, float), s),
             point_force=jnp.concatenate([jnp.reshape(self.point_force, (-1, 3)), jnp.reshape(force, (1, 3))]),
             point_moment=jnp.concatenate([jnp.reshape(self.point_moment, (-1, 3)), jnp.reshape(moment, (1, 3))]),
         )
-        return unchecked(Loads, **(fields | point))
 
     def scaled(self, lam) -> Loads:
         """Every load times lam (the solver's load continuation); the scene as it is."""
-        scaled = {name: lam * getattr(self, name) for name in ("tip_force", "tip_moment", "point_force", "point_moment")}
-        return unchecked(Loads, point_s=self.point_s, distributed_force=lam * self.distributed_force, scene=self.scene, **scaled)
+        names = ("tip_force", "tip_moment", "point_force", "point_moment", "distributed_force")
+        return self._with(**{name: lam * getattr(self, name) for name in names})
+
+
+class TipLoad:
+    """Deprecated: ``TipLoad(force, moment)`` is ``Loads(tip_force=force, tip_moment=moment)``."""
+
+    def __new__(cls, force=(0.0, 0.0, 0.0), moment=(0.0, 0.0, 0.0)) -> Loads:
+        deprecated("tdct.TipLoad(force, moment)", "tdct.Loads(tip_force=force, tip_moment=moment)")
+        return Loads(tip_force=force, tip_moment=moment)
+
+    @staticmethod
+    def from_mass(mass, gravity=STANDARD_GRAVITY) -> Loads:
+        deprecated("tdct.Loads.from_mass", "tdct.Loads.from_mass")
+        return Loads.from_mass(mass, gravity)
+
+
+def gravity_vector(gravity):
+    """World gravity [m/s^2] as a (3,) array; None means none (the robot's weight switched off)."""
+    if gravity is None:
+        return np.zeros(3)
+    g = as_array("gravity", gravity, (3,))
+    if not is_concrete(g):
+        return jnp.asarray(g, dtype=float)
+    note = plausibility_note("gravity", np.linalg.norm(g), "|gravity|")
+    if note:
+        warn_user(note, UnitWarning)
+    return g

@@ -20,11 +20,10 @@ from jax import lax
 from . import status
 from .batch import Kernel, batch_options
 from .checks import check_integer, is_concrete
-from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
+from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
 from .results import CapacityResult, OptimumResult
-from .robot import Robot
-from .solve import check_inputs, solve
+from .solve import problem, solve
 from .sweep import configure, prepare, sweep, unflatten
 
 HEIGHT_TOL = 1e-9
@@ -101,7 +100,7 @@ def capacity(
     Returns:
         Capacity (mass [kg], reachable, iterations, result).
     """
-    check_inputs(robot, act, TipLoad(), solver)
+    check_inputs(robot, act, Loads(), solver)
     max_steps = check_integer("max_steps", max_steps)
     cap = _capacity(robot, act, height, height_tol, gravity_vector(gravity), solver, max_steps)
     status.check(cap.result, throw=throw, what="the load capacity", max_steps=max_steps, unreachable=_unreachable(height))
@@ -112,7 +111,7 @@ def capacity(
 def _capacity(robot, act, height, height_tol, gravity, solver, max_steps) -> Capacity:
     """``capacity`` without its checks, compiled once per robot structure, solver and ``max_steps``
     (its loop and root close over new functions at each call, which would otherwise compile again)."""
-    load = TipLoad()
+    load = Loads()
 
     def f(m):
         return _tip_height(robot, act, load, m, 0.0, gravity, solver)[0] - height

@@ -18,18 +18,16 @@ import numpy as np
 
 from . import fields
 from .checks import as_array, check_range, is_concrete
-from .description import GeneralRobot
-from .inputs import GeneralActuation, Loads
-from .loads import STANDARD_GRAVITY, Actuation, TipLoad
+from .description import Robot
+from .inputs import STANDARD_GRAVITY, Actuation, Loads
 from .options import DEFAULT_SOLVER, SolverOptions
-from .robot import Robot
 from .so3 import rotation_columns
-from .solve import GeneralSolution, check_solution, solution_and_compliance, solve, solve_arguments
+from .solve import Solution, check_solution, solution_and_compliance, solve, solve_arguments
 
 
 def compliance(
-    robot: Robot | GeneralRobot,
-    act: Actuation | GeneralActuation | None,
+    robot: Robot | Robot,
+    act: Actuation | Actuation | None,
     load: TipLoad | Loads | None = None,
     *,
     at=None,
@@ -73,7 +71,7 @@ def compliance(
         C, _ = compliance_and_solution(robot, act, load, gravity=gravity, solver=solver, guess=guess, throw=throw, scene=scene)
     else:
         if isinstance(robot, Robot):
-            robot, act, load = robot.to_general(), GeneralActuation.of(act, 1), Loads.of(load)
+            robot, act, load = robot.to_general(), Actuation.of(act, 1), Loads.of(load)
         args = solve_arguments(robot, act, load, gravity, guess, solver, scene)
         at = as_array("at", at, ())
         if is_concrete(robot.length):
@@ -85,7 +83,7 @@ def compliance(
 
 @jax.jit
 def _compliance_at(robot, act, load, gravity, guess, s, solver):
-    """(d(position, rotation vector at s) / d(point force, moment at s), Solution) of a GeneralRobot."""
+    """(d(position, rotation vector at s) / d(point force, moment at s), Solution) of a Robot."""
 
     def pose(w):
         loads = load.with_point(s, w[:3], w[3:])
@@ -141,12 +139,12 @@ def pose_jacobian(robot, act, load, gravity, guess, solver, wrt):
         def configure(w):
             return robot, act, dataclasses.replace(load, tip_force=w[:3], tip_moment=w[3:]) if general else TipLoad(w[:3], w[3:])
 
-    elif wrt == "actuation" and isinstance(act, GeneralActuation):
+    elif wrt == "actuation" and isinstance(act, Actuation):
         parts = [jnp.asarray(x, float).reshape(-1) for x in (act.tensions, act.displacements, act.insertions)]
         w, cut = jnp.concatenate(parts), np.cumsum([p.size for p in parts])
 
         def configure(w):
-            return robot, GeneralActuation._rebuild(w[: cut[0]], w[cut[1] :], w[cut[0] : cut[1]], act.driven), load
+            return robot, Actuation._rebuild(w[: cut[0]], w[cut[1] :], w[cut[0] : cut[1]], act.driven), load
 
     elif wrt == "actuation":
         w = jnp.concatenate([jnp.asarray(act.tensions), jnp.reshape(jnp.asarray(act.insertion, float), (1,))])
@@ -179,13 +177,13 @@ def kinematic_jacobian(
     The last column is the tube insertion depth, a real differentiable input (one-sided at d = 0
     and d = L, where the solution extends smoothly). Arguments as for ``compliance``.
 
-    With a GeneralActuation, one column per input, shape (6, n_t + len(driven) + n_tubes): each
+    With a Actuation, one column per input, shape (6, n_t + len(driven) + n_tubes): each
     tendon's tension [N] in the robot's order, then each displacement-driven tendon's
     displacement [m] in ``driven`` order, then each tube's insertion [m]. A driven tendon's
     tension column is zero: its tension follows from its displacement.
 
     With a ``scene`` (as for ``tdct.solve``) the contact set is held: the touching candidates stay
-    on their obstacles, and the columns are a GeneralActuation's (a Robot is solved as its
+    on their obstacles, and the columns are a Actuation's (a Robot is solved as its
     ``to_general()``).
     """
     args = solve_arguments(robot, act, load, gravity, guess, solver, scene)
@@ -206,7 +204,7 @@ def parameter_jacobian(
 ):
     """d(tip position, tip rotation vector) / d(fields named in ``params``), (6, len(params)).
 
-    Field names as in ``fields.py``: a Robot's "E_silicone", ..., a GeneralRobot's
+    Field names as in ``fields.py``: a Robot's "E_silicone", ..., a Robot's
     "sections[*].E", "tendons[0].offset", ... ("[*]": one value shared by every item). Units
     follow the fields (e.g. m/Pa for E_silicone). Arguments as for ``compliance``; with a
     ``scene`` a Robot is solved as its ``to_general()``, so ``params`` name the general fields.
@@ -219,7 +217,7 @@ def parameter_jacobian(
     return _checked(_pose_jacobian, args, throw, tuple(params))[0]
 
 
-def check_params(robot: Robot | GeneralRobot, params) -> None:
+def check_params(robot: Robot | Robot, params) -> None:
     """Raises ValueError unless each of ``params`` is one of the robot's fields (``fields.check``)."""
     for p in params:
         try:
@@ -233,7 +231,7 @@ def finite_difference_compliance(robot, act, load=None, *, step: float = 1e-4, g
     paper's method): 6 extra solves, each required to converge. ``step`` [N] is finite and > 0."""
     step = as_array("step", step, ())
     check_range("step", step, 0.0, lo_open=True, unit=" N")
-    load = TipLoad() if load is None else load
+    load = Loads() if load is None else load
     columns = []
     for k in range(3):
         dF = np.zeros(3)
@@ -280,7 +278,7 @@ def positions_at(sol, s):
     """The model's positions p(s) [m] at arc lengths ``s`` [m], shape s.shape + (3,).
 
     Cubic Hermite interpolation between RK4 nodes with the exact tangents p' = R v, so the
-    interpolation error is O(h^4) like RK4's own (a GeneralSolution: each interval between
+    interpolation error is O(h^4) like RK4's own (a Solution: each interval between
     breakpoints with its own end tangents). Arc lengths outside [0, L] are clamped to the ends.
     Differentiable in the solution (for calibration); not in ``s``.
     """
@@ -293,7 +291,7 @@ def positions_at(sol, s):
     h = h[..., None]
     tangent = jnp.einsum("nij,nj->ni", sol.rotation, sol.strain)
     hm0 = h * tangent[k]
-    if not isinstance(sol, GeneralSolution):  # a GeneralSolution has both sides of every breakpoint
+    if not isinstance(sol, Solution):  # a Solution has both sides of every breakpoint
         # The node at s = d carries the backbone's strain, but p' jumps there (the silicone shears):
         # the first silicone interval takes its left tangent from a one-sided cubic through 4 nodes.
         j = (n - 1) // 2

@@ -1,9 +1,8 @@
 """Multiple shooting: a robot's RK4 steps in K intervals integrated side by side (issue 24).
 
 The chain of RK4 steps of single shooting splits into K intervals of equal step count, each
-integrated with ``vmap`` from its own start State. The paper robot's chain is the 2 * steps
-steps of the one scan over both segments (``shooting.shoot``), K dividing 2 * steps. A
-GeneralRobot's is its P breakpoint intervals (``general.plan``) of ``steps`` steps each, K
+integrated with ``vmap`` from its own start State. The chain is the robot's P breakpoint
+intervals (``general.plan``; the paper robot's two, [0, d] and [d, L]) of ``steps`` steps each, K
 dividing P * steps (``general.check_intervals``): cut into pieces of g = gcd(P steps / K,
 steps) steps (``general.pieces``), each inside one breakpoint interval, P steps / (K g) of them an
 interval; K = P q (q dividing steps) makes every breakpoint a boundary, each breakpoint interval
@@ -11,7 +10,7 @@ cut into q, and K dividing P gives each interval P / K whole breakpoint interval
 jump (dN, dM: point loads and masses) is applied at the start of the piece after it, so at an
 interval's start where the breakpoint is a boundary: the start unknowns are the state before it.
 
-The unknowns are single shooting's scaled x (6 + n_d,): the base wrench, then a GeneralRobot's
+The unknowns are single shooting's scaled x (6 + n_d,): the base wrench, then the
 displacement-driven tensions, which enter every interval; and each interior interval's start:
 its rotation R_j and scaled total force n_j = N_j / F_c and moment m_j = M_j / (F_c L), K - 1 of
 each. Positions and tendon lengths are not unknowns: the vector field depends on neither, so
@@ -43,7 +42,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import general, shooting
-from .description import GeneralRobot
 from .newton import continuation, damped
 from .segments import State
 from .so3 import hat, orthonormalize
@@ -58,7 +56,7 @@ ORTHONORMALIZE = 4
 
 class Unknowns(NamedTuple):
     """Multiple shooting's unknowns: the scaled x (6 + n_d,) of single shooting (base wrench, then
-    a GeneralRobot's displacement-driven tensions) and the interior starts' R (K - 1, 3, 3),
+    displacement-driven tensions) and the interior starts' R (K - 1, 3, 3),
     n = N / F_c and m = M / (F_c L) (K - 1, 3) each."""
 
     x: jax.Array
@@ -87,18 +85,11 @@ def check(robot, load, solver) -> None:
     K = solver.intervals
     if K == 1:
         return
-    if isinstance(robot, GeneralRobot):
-        general.check_intervals(robot, load, solver)
-        return
-    if (2 * solver.steps) % K:
-        raise ValueError(
-            f"intervals = {K} must divide the 2 * steps = {2 * solver.steps} RK4 steps of the two segments "
-            f"(one of {[k for k in range(1, 2 * solver.steps + 1) if (2 * solver.steps) % k == 0]})"
-        )
+    general.check_intervals(robot, load, solver)
     if solver.transition != "balanced" or solver.tendon_model != "exact":
         raise ValueError(
             f"solver intervals = {K} with transition = {solver.transition!r}, tendon_model = {solver.tendon_model!r}: "
-            "multiple shooting needs the 'balanced' transition and the 'exact' tendon model (one scan over both segments); "
+            "multiple shooting needs the 'balanced' transition and the 'exact' tendon model; "
             "use intervals = 1 for the paper's variants"
         )
 
@@ -116,24 +107,6 @@ def _cayley(w):
     return jnp.broadcast_to(jnp.eye(3), W.shape) + c * (W + W @ W / 2)
 
 
-def _intervals(robot, act, solver):
-    """The paper robot's one scan over both segments as K intervals of c = 2 steps / K steps:
-    pieces of g = gcd(c, steps) steps (``shooting.per_piece``), their segments and step lengths
-    (K, c / g, ...), and g."""
-    back, sil = shooting.segments(robot, act, solver)
-    n, K = solver.steps, solver.intervals
-    c = 2 * n // K
-    g = int(np.gcd(c, n))
-
-    def split(seg, length):  # a segment's n steps as n / g pieces
-        return jax.tree.map(lambda a: jnp.repeat(a, n // g, axis=0), shooting.per_piece(seg, length, n))
-
-    both = jax.tree.map(
-        lambda a, b: jnp.concatenate([a, b]), split(back, act.insertion), split(sil, robot.length - act.insertion)
-    )
-    return jax.tree.map(lambda a: a.reshape(K, c // g, *a.shape[1:]), both), g
-
-
 def _starts(u: Unknowns, F_c, L):
     """Every interval's start rotation, N and M, (K, ...) each; the base's R = I."""
     R = jnp.concatenate([jnp.eye(3)[None], u.R])
@@ -145,7 +118,7 @@ def _starts(u: Unknowns, F_c, L):
 class Run(NamedTuple):
     """The intervals integrated side by side (``run``): end States (K, ...) from p = 0, tendon
     lengths along each interval (K, n_l; n_l = 0 where none are needed), the actuation with the
-    driven tensions and the plan (a GeneralRobot's; None for the paper robot), and the nodes
+    driven tensions and the plan, and the nodes
     (``path``; None otherwise)."""
 
     ends: State
@@ -156,17 +129,11 @@ class Run(NamedTuple):
 
 
 def run(robot, act, load, gravity, solver, x, starts, F_c, path: bool = False) -> Run:
-    """Every interval integrated from its start (R, N, M) (K, ...): the paper robot's RK4 steps cut
-    into K (``_intervals``), a GeneralRobot's breakpoint intervals cut by ``general.pieces``, its
-    driven tensions from x[6:] in every interval."""
+    """Every interval integrated from its start (R, N, M) (K, ...): the breakpoint intervals cut by
+    ``general.pieces``, the driven tensions from x[6:] in every interval."""
     R, N, M = starts
     K = solver.intervals
     y0 = State(jnp.zeros((K, 3)), R, N, M)
-    if not isinstance(robot, GeneralRobot):
-        (segs, h), g = _intervals(robot, act, solver)
-        out = jax.vmap(lambda seg, h, y: shooting.integrate(seg, y, h, gravity, path, g, solver.rotation))(segs, h, y0)
-        y, nodes = out if path else (out, None)
-        return Run(y, jnp.zeros((K, 0)), act, None, nodes)
     act = general.with_driven(act, x, F_c)
     pl = general.plan(robot, act, load, gravity)
     ps, g = general.pieces(pl, solver.steps, K)
@@ -179,11 +146,8 @@ def run(robot, act, load, gravity, solver, x, starts, F_c, path: bool = False) -
 
 def _closing(robot, load, r: Run, N, M, lengths, x, F_c):
     """The closing residual at the tip's N, M (before the jump at L) with the tendon lengths summed
-    over the intervals and x: tip (6,), then a GeneralRobot's driven tendons (``general.closing``);
-    and its slack flags (None for the paper robot)."""
-    L = robot.length
-    if not isinstance(robot, GeneralRobot):
-        return jnp.concatenate([(N - load.force) / F_c, (M - load.moment) / (F_c * L)]), None
+    over the intervals and x: tip (6,), then the driven tendons (``general.closing``); and its
+    slack flags."""
     act = general.with_driven(r.act, x, F_c)
     return general.closing(robot, act, load, r.plan, State(None, None, N, M), lengths, F_c)
 
@@ -283,21 +247,15 @@ def jacobians(blocks: Blocks):
 
 
 def coarse(robot, act, load, gravity, solver, x, F_c) -> Unknowns:
-    """Interior starts from the scaled x by one cheap pass: one RK4 step per interval (the paper
-    robot) or per piece of ``general.pieces`` (a GeneralRobot)."""
+    """Interior starts from the scaled x by one cheap pass: one RK4 step per piece of
+    ``general.pieces``."""
     L = robot.length
     y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:6] * F_c * L)
-    if isinstance(robot, GeneralRobot):
-        act = general.with_driven(act, x, F_c)
-        ps, g = general.pieces(general.plan(robot, act, load, gravity), solver.steps, solver.intervals)
-        flat = jax.tree.map(lambda a: a.reshape(-1, *a.shape[2:]), ps)._replace(h=ps.h.reshape(-1) * g)
-        _, nodes = general.integrate(robot, load, gravity, flat, general.Carry(y0), 1, path=True, rotation=solver.rotation)
-        ys = jax.tree.map(lambda a: a[ps.h.shape[1] - 1 :: ps.h.shape[1], 1][:-1], nodes.y)
-    else:
-        (segs, h), g = _intervals(robot, act, solver)
-        lengths = jnp.repeat(h, g, axis=1).sum(1)
-        _, ys = shooting.integrate(jax.tree.map(lambda a: a[:, 0], segs), y0, lengths, gravity, True, 1, solver.rotation)
-        ys = jax.tree.map(lambda a: a[1:-1], ys)
+    act = general.with_driven(act, x, F_c)
+    ps, g = general.pieces(general.plan(robot, act, load, gravity), solver.steps, solver.intervals)
+    flat = jax.tree.map(lambda a: a.reshape(-1, *a.shape[2:]), ps)._replace(h=ps.h.reshape(-1) * g)
+    _, nodes = general.integrate(robot, load, gravity, flat, general.Carry(y0), 1, path=True, rotation=solver.rotation)
+    ys = jax.tree.map(lambda a: a[ps.h.shape[1] - 1 :: ps.h.shape[1], 1][:-1], nodes.y)
     R = ys.R
     for _ in range(ORTHONORMALIZE):  # a long step leaves R off SO(3); Newton's steps keep it on
         R = jax.vmap(orthonormalize)(R)
@@ -320,7 +278,7 @@ def _root(robot, act, load, gravity, guess, solver):
     x0, x_straight = shooting.starts(robot, act, load, gravity, guess, F_c)
 
     def F_at(lam):
-        problem = (robot, *shooting.loads_at(robot, act, load, gravity, lam), solver)
+        problem = (robot, *shooting.loads_at(act, load, gravity, lam), solver)
         return lambda u: linearize(*problem, u, F_c), problem
 
     def solve(F, guess, tol, max_iter):
@@ -353,17 +311,13 @@ def _root_jvp(primals, tangents):
 
 def path(robot, act, load, gravity, solver, u: Unknowns):
     """``shooting.shoot``'s residual and path from the Unknowns, the intervals integrated side by
-    side: the paper robot's States at all 2 * steps + 1 nodes, a GeneralRobot's (nodes, plan,
-    actuation, lengths, slack) as ``general.shoot`` gives them (each interior start node the
-    previous interval's end)."""
+    side: (nodes, plan, actuation, lengths, slack) as ``general.shoot`` gives them (each interior
+    start node the previous interval's end)."""
     F_c = shooting.force_scale(robot, act, load, gravity)
     res, r = evaluate(robot, act, load, gravity, solver, u, F_c, path=True)
     n_x = u.x.size
     tail = res[-n_x:]
     offsets = jnp.cumsum(r.ends.p, 0) - r.ends.p
-    if not isinstance(robot, GeneralRobot):
-        ys = r.nodes._replace(p=r.nodes.p + offsets[:, None])
-        return tail, jax.tree.map(lambda a: jnp.concatenate([a[0], a[1:, 1:].reshape(-1, *a.shape[2:])]), ys)
     ys = r.nodes.y._replace(p=r.nodes.y.p + offsets[:, None, None])
     n_b = r.plan.b.size - 1
 

@@ -44,7 +44,7 @@ class SolverOptions:
             chain of RK4 steps (single shooting); K > 1 splits the chain into K intervals of equal
             step count integrated side by side, their start states unknowns too (multiple
             shooting, docs/performance.md). The chain is the paper robot's 2 * steps steps, or a
-            GeneralRobot's P * steps (P breakpoint intervals, ``steps`` each; every breakpoint an
+            Robot's P * steps (P breakpoint intervals, ``steps`` each; every breakpoint an
             interval boundary when K = P q, q dividing ``steps``); K must divide it, checked
             when a solve is traced (ValueError naming the allowed values).
         rotation: how RK4 carries the rotation R (static; the same numbers to round-off):

@@ -16,11 +16,10 @@ from tqdm import tqdm
 
 from .ik import Bounds, LeastTension, Stiffness, Target, inverse_kinematics
 from .lm import levenberg_marquardt
-from .loads import Actuation, TipLoad
+from .inputs import Actuation, Loads
 from .manipulation import capacity, insertion_optimum, load_capacity, optimal_insertion
 from .mechanics import compliance, compliance_ellipsoid
 from .options import DEFAULT_SOLVER
-from .robot import Robot
 from .scene import Capsule, Plane, Scene
 from .solve import solve
 from .sweep import sweep
@@ -90,7 +89,7 @@ def tip_pose_grid(robot: Robot, tensions=FIG9_TENSIONS, insertions=FIG9_INSERTIO
 def fig10_compliances(robot: Robot, tension: float = FIG10_TENSION, insertions=(0.0, 0.05, 0.10, 0.15), **solve_options) -> dict:
     """Fig. 10: CM [m/N] for several insertion depths [m] at one tension on tendon 1, no tip load."""
     (tau,) = tendon1(robot, [tension])
-    return {f"insertion {1e3 * d:.0f} mm": compliance(robot, Actuation(tau, d), TipLoad(), **solve_options) for d in insertions}
+    return {f"insertion {1e3 * d:.0f} mm": compliance(robot, Actuation(tau, d), Loads(), **solve_options) for d in insertions}
 
 
 def fig11_eigenvalues(robot: Robot, tensions=FIG11_TENSIONS, insertions=FIG11_INSERTIONS, **options):
@@ -372,7 +371,7 @@ def highest_reach(
     Returns:
         HighestReach.
     """
-    load = TipLoad.from_mass(mass)
+    load = Loads.from_mass(mass)
     taus = np.linspace(0.0, tension, n_tensions)
     depths = np.linspace(0.0, float(robot.length), n_insertions)
     grid = sweep(robot, None, load, grid={"tensions": tendon1(robot, taus), "insertion": depths}, solver=solver, **options)
@@ -426,7 +425,7 @@ def stiffest_reach(
     ``progress``: a bar over the targets on stderr (one per call); ``options`` go to
     ``inverse_kinematics``."""
     positions = np.column_stack([np.zeros(len(heights)), heights, np.zeros(len(heights))])
-    load = TipLoad.from_mass(mass)
+    load = Loads.from_mass(mass)
     common = dict(load=load, tendons=(1,), bounds=Bounds(tension=(0.0, tension)), **options)
     down = np.array([0.0, -1.0, 0.0])
     with _bar(2 * len(heights), "Sec. V.A inverse kinematics", "target", progress) as bar:
@@ -491,7 +490,7 @@ def stiffness_map(
             r = _reach(robot, positions, "yz", chunk, bar, label, tendons=(1, 3), objective=objective, **options)
             ok = r["result"] == 0
             out[name] = (
-                _compliance_along(robot, r, down, TipLoad()).reshape(made.shape),
+                _compliance_along(robot, r, down, Loads()).reshape(made.shape),
                 np.where(ok, r["insertion"], np.nan).reshape(made.shape),
             )
         bar.set_postfix_str("")

@@ -123,7 +123,7 @@ def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, 
 
 @_styled
 def plot_robot(sol, robot, act=None, load=None, path: str | Path | None = None, title: str | None = None):
-    """Side view (world z-y), top view (z-x) and 3D view of a solved ``GeneralRobot``, in mm: the
+    """Side view (world z-y), top view (z-x) and 3D view of a solved ``Robot``, in mm: the
     body coloured by section, each tube's insertion shaded, every tendon along the body from the
     base to its anchor (a dot, its number beside it in 3D, in its anchor section's colour), point
     masses as disks across the body, point loads and the tip force as arrows. With a scene in the
@@ -133,17 +133,17 @@ def plot_robot(sol, robot, act=None, load=None, path: str | Path | None = None, 
     from the touching point, on the same scale as the loads.
 
     Args:
-        sol: a single (unbatched) GeneralSolution of ``robot`` (with ``sol.contact`` for a scene).
-        robot: the GeneralRobot solved.
-        act, load: its GeneralActuation (tube depths) and Loads (or TipLoad; ``load.scene``: the
+        sol: a single (unbatched) Solution of ``robot`` (with ``sol.contact`` for a scene).
+        robot: the Robot solved.
+        act, load: its Actuation (tube depths) and Loads (or TipLoad; ``load.scene``: the
             obstacles it was solved with); None: none.
         path: where to save a PNG; the figure is returned either way.
         title: figure title.
     """
-    from .inputs import GeneralActuation, Loads
+    from .inputs import Actuation, Loads
 
     plt = _pyplot()
-    act, load = GeneralActuation.of(act, robot.n_tubes), Loads.of(load)
+    act, load = Actuation.of(act, robot.n_tubes), Loads.of(load)
     s, p, R = np.asarray(sol.s), np.asarray(sol.position) * 1e3, np.asarray(sol.rotation)
     length = float(robot.length)
     ends = [float(sec.end) for sec in robot.sections]

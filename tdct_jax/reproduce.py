@@ -19,8 +19,7 @@ import jax
 import numpy as np
 
 from . import paper, plotting
-from .inputs import GeneralActuation, Loads
-from .robot import Robot
+from .inputs import Actuation, Loads
 
 FULL = dict(
     fig8a_insertions=paper.FIG8A_INSERTIONS,
@@ -276,7 +275,7 @@ def _contact(robot, grids, out, opts, say):
     general = robot.to_general()
     load = Loads().with_scene(scene)
     title = f"over a cylinder, tendon 3 at {paper.CYLINDER_TENSION:g} N, no tube"
-    plotting.plot_robot(sol, general, GeneralActuation.of(act, general.n_tubes), load, out / "contact_cylinder.png", title=title)
+    plotting.plot_robot(sol, general, Actuation.of(act, general.n_tubes), load, out / "contact_cylinder.png", title=title)
     ok = res["result"] == 0
     note = f"tendon 3 at {paper.CONTACT_TENSION:g} N; {np.count_nonzero(~ok)} of {ok.size} insertions not converged"
     f = np.where(ok, res["force"], np.nan)

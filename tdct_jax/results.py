@@ -37,7 +37,7 @@ UNITS = {
 
 
 def unit_of(name: str) -> str:
-    """The SI unit of a sweepable input or robot field (a GeneralRobot's ``sections[*].E`` by its
+    """The SI unit of a sweepable input or robot field (a Robot's ``sections[*].E`` by its
     last part), as written in CSV column names."""
     name = name.rsplit(".", 1)[-1]
     if name in UNITS:
@@ -118,7 +118,7 @@ class SweepResult(GridResult):
             M(0) [N m]): as on ``Solution``.
         s, position: arc length [m] and shape [m] at the RK4 nodes (with ``shapes=True``).
         compliance: 3x3 tip compliance [m/N] (with ``compliance=True``; NaN where not converged).
-        tensions: a GeneralRobot's tendon tensions [N], (n_tendons,): the given ones and those
+        tensions: a Robot's tendon tensions [N], (n_tendons,): the given ones and those
             found for displacement-driven tendons (slack: exactly 0); None for a Robot.
     """
 

@@ -36,9 +36,8 @@ from jax import lax
 
 from . import fields, general, status
 from .checks import as_array, check_range, is_concrete, read_toml
-from .description import GeneralRobot
-from .inputs import GeneralActuation, Loads
-from .loads import STANDARD_GRAVITY
+from .description import Robot
+from .inputs import STANDARD_GRAVITY, Actuation, Loads
 from .options import DEFAULT_SOLVER, SolverOptions
 from .shooting import force_scale, root, shoot, unscaled
 from .tree import pytree, set_fields
@@ -56,7 +55,7 @@ class Rig:
     """The robot on its rig (module docstring); SI units, angles in rad.
 
     Attributes:
-        robot: a GeneralRobot whose tendons all have a ``stiffness`` (EA [N]).
+        robot: a Robot whose tendons all have a ``stiffness`` (EA [N]).
         scale: servo reading to tendon displacement [1].
         pretension: each tendon's tension in the straight robot at servo 0 [N], (n_t,).
         rotation: rotation vector of the robot base frame in the measurement frame [rad], (3,).
@@ -65,7 +64,7 @@ class Rig:
         g: gravity's magnitude [m/s^2] (0: weightless).
     """
 
-    robot: GeneralRobot
+    robot: Robot
     scale: float = 1.0
     pretension: object = None
     rotation: object = (0.0, 0.0, 0.0)
@@ -75,8 +74,8 @@ class Rig:
     g: float = STANDARD_GRAVITY
 
     def __post_init__(self):
-        if not isinstance(self.robot, GeneralRobot):
-            raise TypeError(f"Rig.robot must be a GeneralRobot (a robot file), got {type(self.robot).__name__}")
+        if not isinstance(self.robot, Robot):
+            raise TypeError(f"Rig.robot must be a Robot (a robot file), got {type(self.robot).__name__}")
         n = self.robot.n_tendons
         missing = [i for i, t in enumerate(self.robot.tendons) if t.stiffness is None]
         if missing:
@@ -107,7 +106,7 @@ class Rig:
         """
         path = Path(path)
         data = read_toml(path, "robot file")
-        robot = GeneralRobot.from_table(data, path)
+        robot = Robot.from_table(data, path)
         table = data.get("rig", {})
         keys = {"scale": 1.0, "pretension": None, "rotation_deg": (0.0, 0.0, 0.0), "translation": (0.0, 0.0, 0.0)}
         keys |= {"gravity_azimuth_deg": 0.0, "gravity_elevation_deg": -90.0, "g": STANDARD_GRAVITY}
@@ -243,7 +242,7 @@ def replace(rig: Rig, values: Mapping[str, object]) -> Rig:
     return new
 
 
-def _unknowns(robot: GeneralRobot):
+def _unknowns(robot: Robot):
     """Size of a sample's unknowns: the base wrench and every tendon's tension."""
     return 6 + robot.n_tendons
 
@@ -256,7 +255,7 @@ def solve_sample(rig: Rig, servo, guess, solver: SolverOptions = DEFAULT_SOLVER)
     n = robot.n_tendons
     guess = lax.stop_gradient(guess)
     warm = jnp.all(jnp.isfinite(guess))
-    act = GeneralActuation._rebuild(
+    act = Actuation._rebuild(
         jnp.where(warm, guess[6:], 0.0), jnp.zeros(robot.n_tubes), rig.displacements(servo), tuple(range(n))
     )
     problem = (robot, act, Loads(), rig.gravity)

@@ -260,12 +260,16 @@ def vector_field(seg: Segment, gravity):
         dp = y.world(v)
         dM = -jnp.cross(dp, y.N)
         if not seg.tilt:
-            # eq. 26 as printed is not the derivative of a total moment; this is what it adds
-            # (zero unless the robot twists; docs/model.md, segment "backbone").
-            dM = dM - y.world(jnp.sum(seg.tau[:, None] * jnp.cross(E3[None], jnp.cross(u[None], seg.r)), 0))
+            dM = dM - y.world(printed_moment(seg, u))
         return y.rate(dp, u, -seg.rho * gravity, dM)
 
     return f
+
+
+def printed_moment(seg: Segment, u):
+    """What eq. 26 as printed adds to M' (body frame): it is not the derivative of a total moment
+    (zero unless the robot twists; docs/model.md, segment "backbone")."""
+    return jnp.sum(seg.tau[:, None] * jnp.cross(E3[None], jnp.cross(u[None], seg.r)), 0)
 
 
 def paper_transition(back: Segment, sil: Segment, y: State) -> State:

@@ -5,18 +5,14 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax import lax
 
-from . import general, multiple, status
-from .checks import as_array, check_range, is_concrete
-from .description import GeneralRobot
-from .inputs import GeneralActuation, Loads
-from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
+from . import general, multiple, roots, status
+from .checks import as_array, is_concrete
+from .description import Robot
+from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
-from .robot import Robot
 from .scene import Scene
-from .segments import Segment, State, rod_force, strains
-from .shooting import force_scale, root, segments, shoot, tip_compliance
+from .shooting import force_scale, shoot, tip_compliance
 from .tree import pytree
 
 
@@ -27,7 +23,12 @@ def tip_angle(R):
 
 @pytree
 class Solution:
-    """Static shape of the robot at the RK4 nodes (2 * steps + 1 of them, s = d appears once).
+    """Static shape of the robot at the RK4 nodes.
+
+    Nodes come interval by interval (general.py: the intervals between section ends, tube
+    depths, tendon anchors and point loads), ``steps + 1`` each: both sides of every breakpoint
+    appear, ``total_force`` and ``total_moment`` jumping at point loads. The paper's robot has
+    two intervals, [0, d] and [d, L].
 
     Attributes:
         s: arc length of the undeformed robot [m], (n,).
@@ -36,7 +37,8 @@ class Solution:
         force, moment: the rod's internal force n(s) [N] and moment m(s) [N m], world frame.
         total_force, total_moment: rod plus tendons, N(s) and M(s); at s = 0 the load on the base.
         strain, curvature: v(s) and u(s) [1/m], body frame.
-        residual: scaled tip residual (force rows, then moment rows), (6,).
+        residual: scaled residual (tip force rows, then moment rows, then any driven tendons'
+            and contact rows).
         residual_norm: its max norm.
         iterations: Newton steps over all load stages.
         stages: load stages of the last ramp tried (one of SolverOptions.stages).
@@ -46,6 +48,12 @@ class Solution:
         contact: with a scene (``solve(..., scene=)``), a ``contact.Contact``: candidates' arc
             lengths, positions, gaps, normal forces, normals, the wrench on each obstacle and
             which touch; None without one.
+        tensions: each tendon's tension [N], (n_t,): the given ones, and those found for the
+            displacement-driven tendons.
+        displacements: what each tendon's encoder reads [m], (n_t,): its rest length inside the
+            straight robot less its present rest length there (positive when pulled); for a
+            displacement-driven tendon, its command (more than the shape takes up where slack).
+        slack: True for a displacement-driven tendon gone slack (its tension exactly 0), (n_t,).
     """
 
     s: jax.Array
@@ -63,6 +71,9 @@ class Solution:
     stages: jax.Array
     result: jax.Array
     contact: object
+    tensions: jax.Array
+    displacements: jax.Array
+    slack: jax.Array
 
     @property
     def converged(self):
@@ -91,25 +102,20 @@ class Solution:
 
 
 @jax.jit
-def solution_and_compliance(robot: Robot, act: Actuation, load: TipLoad, gravity, guess, solver: SolverOptions):
+def solution_and_compliance(robot: Robot, act: Actuation, load: Loads, gravity, guess, solver: SolverOptions):
     """The compiled solve: the Solution, and the 6x6 tip compliance d(tip position, tip rotation
     vector) / d(F_e, M_e) (eq. 41) from Newton's Jacobians at the root, for one 6x6 solve more.
 
     The compliance is exact in value but has no derivatives of its own (``tdct.compliance``
     supplies them). Unchecked: ``solve_arguments`` checks the arguments.
     """
-    if solver.intervals > 1:  # multiple shooting: the path from the intervals, side by side
-        u, info = multiple.root(robot, act, load, gravity, guess, solver)
-        res, ys = multiple.path(robot, act, load, gravity, solver, u)
-        sol = _assembled(robot, act, load, gravity, solver, ys, res, info)
-    else:
-        x, info = root(robot, act, load, gravity, guess, solver)
-        sol = solution_at(robot, act, load, gravity, solver, x, info)
+    _, info, res, ys = roots.path(robot, act, load, gravity, guess, solver)
+    sol = _assembled(robot, act, load, gravity, solver, ys, res, info)
     J_res, (J_p, J_R) = info.jacobians
     return sol, tip_compliance(robot, sol.tip_rotation, J_res, J_p, J_R, force_scale(robot, act, load, gravity))
 
 
-def solution_at(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: SolverOptions, x, info) -> Solution:
+def solution_at(robot: Robot, act: Actuation, load: Loads, gravity, solver: SolverOptions, x, info) -> Solution:
     """The Solution at the scaled base unknowns x of a root found elsewhere (``info``: its
     iterations, stages and result code), by one integration along the path."""
     res, ys = shoot(robot, act, load, gravity, solver, x, force_scale(robot, act, load, gravity), path=True)
@@ -117,17 +123,11 @@ def solution_at(robot: Robot, act: Actuation, load: TipLoad, gravity, solver: So
 
 
 def _assembled(robot, act, load, gravity, solver, ys, res, info) -> Solution:
-    """The Solution from a path ``ys`` as ``shoot`` (or ``multiple.path``) gives it, for either robot."""
-    if isinstance(robot, GeneralRobot):
-        return _assemble_general(robot, act, load, gravity, solver, ys, res, info)
-    return _assemble(robot, act, solver, ys, res, info)
-
-
-def _assemble_general(robot, act, load, gravity, solver, ys, res, info) -> Solution:
-    """Solution of a GeneralRobot: nodes interval by interval, steps + 1 each, so that both sides
-    of every breakpoint appear (the node at an interval's start is after the breakpoint's jump)."""
+    """The Solution from a path ``ys`` as ``shoot`` (or ``multiple.path``) gives it: nodes
+    interval by interval, steps + 1 each, so that both sides of every breakpoint appear (the node
+    at an interval's start is after the breakpoint's jump)."""
     nodes, pl, act, lengths, slack, touching = ys
-    s, y, (v, u, n, m) = general.node_quantities(robot, act, load, gravity, nodes, pl)
+    s, y, (v, u, n, m) = general.node_quantities(robot, act, load, gravity, nodes, pl, solver.tendon_model)
     # a slack tendon's tension is zero to round-off at the root (the Fischer-Burmeister row is
     # linear in it there): reported as exactly zero; a driven tendon's encoder reads its command
     tensions = jnp.where(slack, 0.0, jnp.asarray(act.tensions, float))
@@ -135,79 +135,16 @@ def _assemble_general(robot, act, load, gravity, solver, ys, res, info) -> Solut
     if act.driven:
         displacements = displacements.at[np.asarray(act.driven)].set(act.displacements)
     result = info.result if touching is None else status.contact_result(info.result, touching.gap, 2 * solver.tol * robot.length)
-    return GeneralSolution(
+    return Solution(
         s, y.p, y.R, n, m, y.N, y.M, v, u, res, jnp.max(jnp.abs(res)), info.iterations, info.stages, result, touching,
         tensions, displacements, slack,
     )  # fmt: skip
 
 
-@pytree
-class GeneralSolution(Solution):
-    """The Solution of a GeneralRobot, with each tendon's tension, displacement and slack flag.
-
-    Nodes come interval by interval (``general.py``), ``steps + 1`` each: both sides of every
-    breakpoint appear, ``total_force`` and ``total_moment`` jumping at point loads.
-
-    Attributes (besides Solution's):
-        tensions: each tendon's tension [N], (n_t,): the given ones, and those found for the
-            displacement-driven tendons.
-        displacements: what each tendon's encoder reads [m], (n_t,): its rest length inside the
-            straight robot less its present rest length there (positive when pulled); for a
-            displacement-driven tendon, its command (more than the shape takes up where slack).
-        slack: True for a displacement-driven tendon gone slack (its tension exactly 0), (n_t,).
-    """
-
-    tensions: jax.Array
-    displacements: jax.Array
-    slack: jax.Array
-
-
-def _node_quantities(back: Segment, sil: Segment, y: State, in_backbone):
-    """Strains v, u and rod force n, m at one node, by the segment the node belongs to (its
-    numbers chosen first where both segments share the tendon model: one constitutive solve)."""
-
-    def with_segment(seg):
-        v, u = strains(seg, y.R, y.N, y.M)
-        return (v, u, *rod_force(seg, y, v, u))
-
-    if back.tilt == sil.tilt:
-        return with_segment(jax.tree.map(lambda a, b: jnp.where(in_backbone, a, b), back, sil))
-    return jax.tree.map(lambda a, b: jnp.where(in_backbone, a, b), with_segment(back), with_segment(sil))
-
-
-def _assemble(robot, act, solver, ys: State, res, info) -> Solution:
-    """Solution from the node states: strains and rod forces by each node's own segment."""
-    back, sil = segments(robot, act, solver)
-    n_b = solver.steps + 1
-    d, L = act.insertion, robot.length
-    s = jnp.concatenate([jnp.linspace(0.0, 1.0, n_b) * d, d + jnp.linspace(0.0, 1.0, n_b)[1:] * (L - d)])
-    in_backbone = jnp.where(jnp.arange(s.size) < n_b, d > 0, d >= L)
-
-    # lax.map: a vmap here, inside a sweep's vmap of 16 or more lanes, deadlocks XLA:CPU (jax 0.10.2).
-    v, u, n, m = lax.map(lambda a: _node_quantities(back, sil, *a), (ys, in_backbone))
-    return Solution(
-        s=s,
-        position=ys.p,
-        rotation=ys.R,
-        force=n,
-        moment=m,
-        total_force=ys.N,
-        total_moment=ys.M,
-        strain=v,
-        curvature=u,
-        residual=res,
-        residual_norm=jnp.max(jnp.abs(res)),
-        iterations=info.iterations,
-        stages=info.stages,
-        result=info.result,
-        contact=None,
-    )
-
-
 def solve(
-    robot: Robot | GeneralRobot,
-    act: Actuation | GeneralActuation | None = None,
-    load: TipLoad | Loads | None = None,
+    robot: Robot,
+    act: Actuation | None = None,
+    load: Loads | None = None,
     *,
     gravity=STANDARD_GRAVITY,
     solver: SolverOptions = DEFAULT_SOLVER,
@@ -215,21 +152,20 @@ def solve(
     throw: bool = True,
     scene=None,
 ) -> Solution:
-    """Static shape of the TDCT robot (paper Sec. II; docs/model.md) by Newton shooting.
+    """Static shape of a tendon-driven robot (paper Sec. II; docs/model.md) by Newton shooting.
 
-    The six unknowns are the total force and moment at the base, started from the straight rod.
-    Derivatives of every output with respect to every input (robot fields, tensions, insertion,
-    tip load, gravity) come from implicit differentiation of the converged root, so ``jax.grad``,
-    ``jax.jacfwd`` and ``jax.vmap`` pass straight through.
+    The unknowns are the total force and moment at the base (and the tensions of
+    displacement-driven tendons), started from the straight rod. Derivatives of every output with
+    respect to every input (robot fields, tensions, insertions, loads, gravity) come from implicit
+    differentiation of the converged root, so ``jax.grad``, ``jax.jacfwd`` and ``jax.vmap`` pass
+    straight through.
 
     Args:
-        robot: geometry and materials: the paper's ``Robot``, or any ``GeneralRobot`` (sections,
-            tendons anchored anywhere, tubes, point masses; general.py).
-        act: tendon tensions [N] and tube insertion depth [m]; for a GeneralRobot a
-            GeneralActuation (tensions and per-tube insertions), an Actuation (one tube), or None
-            for a robot without tendons and tubes.
-        load: tip force [N] and moment [N m] in the world frame; none by default. For a
-            GeneralRobot also ``Loads`` (point loads along the body, a distributed force).
+        robot: geometry and materials (``Robot``: ``Robot.paper()``, ``Robot.from_toml(path)``).
+        act: tendon tensions [N] (or displacements [m]) and tube insertions [m]; None: nothing
+            pulled, every tube withdrawn.
+        load: tip load and loads along the body, world frame (``Loads``; ``Loads.from_mass``
+            for a tip mass); None: none.
         gravity: world gravity [m/s^2]; None or zeros switch the robot's weight off.
         solver: steps, transition, tendon model, tolerance and Newton limit (SolverOptions).
         guess: base force and moment (N(0) [N], M(0) [N m]), shape (6,), to start Newton from,
@@ -240,8 +176,7 @@ def solve(
         scene: obstacles the robot may touch (a ``tdct.Scene``; contact.py): frictionless
             contact along the body and at the tip, reported in ``sol.contact``. It rides in the
             Loads (``Loads.scene``), so derivatives in the obstacles' numbers and vmaps over them
-            pass through; a paper ``Robot`` is then solved as ``robot.to_general()`` (the same
-            solution to 1e-12). Single shooting only (``solver.intervals`` = 1).
+            pass through. Single shooting only (``solver.intervals`` = 1).
 
     Returns:
         Solution.
@@ -270,42 +205,46 @@ def check_solution(sol: Solution, solver: SolverOptions, throw: bool, what: str 
 
 
 def solve_arguments(robot, act, load, gravity, guess, solver, scene=None) -> tuple:
-    """Checks a single solve's arguments; returns those of ``solution_and_compliance``. A
-    GeneralRobot takes a GeneralActuation (or an Actuation, or None) and Loads (or a TipLoad); a
-    scene goes into the Loads (a Robot is then solved as its ``to_general()``)."""
-    if scene is not None:
-        robot, act, load = with_scene(robot, act, load, scene, solver)
-    if isinstance(robot, GeneralRobot):
-        act, load = GeneralActuation.of(act, robot.n_tubes), Loads.of(load)
-        general.check_arguments(robot, act, load, solver)
-        multiple.check(robot, load, solver)
-        guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
-        return robot, act, load, *_on_cpu(gravity_vector(gravity), guess), solver
-    load = TipLoad() if load is None else load
-    check_inputs(robot, act, load, solver)
-    multiple.check(robot, load, solver)
-    robot.warn_outside_calibration(act.tensions, load.force)
+    """Checks a single solve's arguments; returns those of ``solution_and_compliance``."""
+    robot, act, load = problem(robot, act, load, solver, scene)
+    robot.warn_outside_calibration(act.tensions, load.tip_force)
     guess = jnp.full(6, jnp.nan) if guess is None else as_array("guess", guess, (6,))
-    gravity, guess = _on_cpu(gravity_vector(gravity), guess)
-    return robot, act, load, gravity, guess, solver
+    return robot, act, load, *_on_cpu(gravity_vector(gravity), guess), solver
 
 
-def with_scene(robot, act, load, scene, solver) -> tuple:
-    """(GeneralRobot, GeneralActuation, Loads) with ``scene`` in the Loads, after its checks: a
-    Scene, the base outside every obstacle, single shooting."""
+def problem(robot, act, load, solver, scene=None, *, batch: bool = False) -> tuple[Robot, Actuation, Loads]:
+    """(robot, act, load) checked, with defaults (``Actuation.of``, ``Loads.of``) and ``scene`` in
+    the Loads: types, counts and ranges that need robot and inputs together, the solver options
+    against the robot. Without ``batch``, concrete inputs must be one configuration."""
+    for name, obj, cls in (("robot", robot, Robot), ("solver", solver, SolverOptions)):
+        if not isinstance(obj, cls):
+            raise TypeError(f"{name} must be a tdct.{cls.__name__}, got {type(obj).__name__}")
+    act, load = Actuation.of(act, robot), Loads.of(load)
+    if scene is not None:
+        load = with_scene(robot, load, scene, solver)
+    if not batch:
+        for name, x, core in (("tensions", act.tensions, 1), ("insertions", act.insertions, 1), ("tip_force", load.tip_force, 1)):
+            if is_concrete(x) and np.ndim(x) > core:
+                raise ValueError(
+                    f"{name} has shape {np.shape(x)}: one configuration is expected here; solve a batch with tdct.sweep or jax.vmap"
+                )
+    general.check_arguments(robot, act, load, solver)
+    multiple.check(robot, load, solver)
+    return robot, act, load
+
+
+def with_scene(robot: Robot, load: Loads, scene, solver) -> Loads:
+    """``load`` with ``scene`` in it, after its checks: a Scene, the base outside every obstacle,
+    single shooting."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a tdct.Scene, got {type(scene).__name__}")
     if solver.intervals > 1:
         raise ValueError(
             f"solver intervals = {solver.intervals} with a scene: contact is solved by single shooting only; use intervals = 1"
         )
-    if isinstance(robot, Robot):
-        robot, act = robot.to_general(), GeneralActuation.of(act, 1)
-    elif not isinstance(robot, GeneralRobot):
-        raise TypeError(f"robot must be a tdct.Robot or tdct.GeneralRobot, got {type(robot).__name__}")
     if is_concrete(robot.sections[0].outer_diameter):
         scene.check_base(float(robot.sections[0].outer_diameter) / 2)
-    return robot, act, Loads.of(load).with_scene(scene)
+    return load.with_scene(scene)
 
 
 def _on_cpu(*arrays):
@@ -316,32 +255,3 @@ def _on_cpu(*arrays):
     if jax.default_backend() == "cpu" or not all(is_concrete(a) for a in arrays):
         return arrays
     return jax.device_put(arrays, jax.local_devices(backend="cpu")[0])
-
-
-def check_inputs(robot: Robot, act: Actuation, load: TipLoad, solver: SolverOptions, *, batch: bool = False) -> None:
-    """Types, and the cross-checks between robot and inputs that the pytrees cannot make alone.
-
-    Without ``batch``, concrete inputs must be one configuration (no batch axes).
-    """
-    for name, obj, cls in (
-        ("robot", robot, Robot),
-        ("act", act, Actuation),
-        ("load", load, TipLoad),
-        ("solver", solver, SolverOptions),
-    ):
-        if not isinstance(obj, cls):
-            raise TypeError(f"{name} must be a tdct.{cls.__name__}, got {type(obj).__name__}")
-    if np.shape(act.tensions)[-1:] != (robot.n_tendons,):
-        raise ValueError(
-            f"tensions has shape {np.shape(act.tensions)}: the robot has {robot.n_tendons} tendons, one tension each"
-        )
-    if not batch:
-        for name, x, core in (("tensions", act.tensions, 1), ("insertion", act.insertion, 0), ("force", load.force, 1)):
-            if is_concrete(x) and np.ndim(x) > core:
-                raise ValueError(
-                    f"{name} has shape {np.shape(x)}: one configuration is expected here; "
-                    "solve a batch with tdct.sweep or jax.vmap"
-                )
-    if is_concrete(act.insertion) and is_concrete(robot.length):
-        L = float(robot.length)
-        check_range("insertion", act.insertion, 0.0, L, unit=f" m (0 to the robot length {L:g} m)")

@@ -25,7 +25,7 @@ The robot file may be a general robot file (``[[sections]]``, ``[[tendons]]``, .
 per tube), "driven" (the displacement-driven tendons, numbered from 1 as ``tendons = [...]``
 is) and their "displacements" [m], "force", "moment", and point loads "point_s" [m],
 "point_force", "point_moment" (lists of [x, y, z]); its [grid] or [batch] the names of
-``tdct.sweep`` for a GeneralRobot (a linspace of "displacements" picks driven tendons by number,
+``tdct.sweep`` for a Robot (a linspace of "displacements" picks driven tendons by number,
 ``tendons = [1]``), fields quoted as TOML keys: ``"sections[*].E" = [50e9, 60e9]``.
 """
 
@@ -38,18 +38,16 @@ import numpy as np
 
 from . import general
 from .checks import check_integer, read_toml
-from .description import GeneralRobot
-from .inputs import GeneralActuation, Loads
-from .loads import STANDARD_GRAVITY, Actuation, TipLoad
+from .description import Robot
+from .inputs import STANDARD_GRAVITY, Actuation, Loads
 from .options import SolverOptions
-from .robot import Robot
 from .sweep import check_points
 
 OPTIONS = ("chunk_size", "shapes", "compliance", "warm_start", "gravity")
 TABLES = ("robot", "base", "solver", "grid", "batch")
 BASE = ("tensions", "insertion", "force", "moment")
 GENERAL_BASE = ("tensions", "insertions", "driven", "displacements", "force", "moment", "point_s", "point_force", "point_moment")
-"""[base] keys for a Robot, and for a GeneralRobot."""
+"""[base] keys for a Robot, and for a Robot."""
 PICKS = {"tensions": "tendons", "displacements": "tendons", "force": "components", "moment": "components"}
 """Vector inputs a linspace can sweep part of: the key that names the entries it sets."""
 COMPONENTS = ("x", "y", "z")
@@ -108,14 +106,14 @@ def _arguments(data: dict, folder: Path) -> dict:
         raise ValueError(f'robot = {robot!r} must be a robot file (robot = "robot.toml") or a [robot] table of Robot fields')
     base = _table(data, "base")
     zero = (0.0, 0.0, 0.0)
-    if isinstance(robot, GeneralRobot):
+    if isinstance(robot, Robot):
         _known("[base] ", base, GENERAL_BASE)
         driven, n = base.get("driven", []), robot.n_tendons
         if not (isinstance(driven, list) and all(i in range(1, n + 1) and not isinstance(i, bool) for i in driven)):
             raise ValueError(f"[base] driven = {driven!r} must list tendons numbered 1 to {n} (1 for the first)")
         act = _built(
             "base",
-            GeneralActuation,
+            Actuation,
             tensions=base.get("tensions", np.zeros(robot.n_tendons)),
             insertions=base.get("insertions", np.zeros(robot.n_tubes)),
             displacements=base.get("displacements", np.zeros(len(driven))),
@@ -132,7 +130,7 @@ def _arguments(data: dict, folder: Path) -> dict:
     solver = _table(data, "solver")
     _known("[solver] ", solver, [f.name for f in dataclasses.fields(SolverOptions)])
     args = dict(robot=robot, act=act, load=load, solver=_built("solver", SolverOptions, **solver))
-    if isinstance(robot, GeneralRobot):  # counts and ranges that need the robot and the base together
+    if isinstance(robot, Robot):  # counts and ranges that need the robot and the base together
         _built("base", general.check_arguments, robot=robot, act=act, load=load, solver=args["solver"])
     tables = [name for name in ("grid", "batch") if name in data]
     if len(tables) != 1:
@@ -150,7 +148,7 @@ def _arguments(data: dict, folder: Path) -> dict:
         force=(base.get("force", zero), COMPONENTS),
         moment=(base.get("moment", zero), COMPONENTS),
     )
-    if isinstance(robot, GeneralRobot):
+    if isinstance(robot, Robot):
         defaults["displacements"] = (act.displacements, tuple(i + 1 for i in act.driven))
     args[kind] = {name: _values(f"{kind}.{name}", v, *defaults.get(name, (None, None))) for name, v in columns.items()}
     _built(kind, lambda: check_points(robot, act, load, args.get("grid"), args.get("batch")))  # values, host memory

@@ -3,8 +3,8 @@
 A sweep varies named inputs around a base configuration: the actuation ("tensions" [N],
 "insertion" [m]), the tip load ("force" [N], "moment" [N m], "tip_mass" [kg], whose weight adds
 to the force) and any scalar Robot field ("E_silicone" [Pa], "tendon_offset" [m], ...). A
-``GeneralRobot`` names "tensions", "insertions" (one per tube) and "displacements" (one per
-displacement-driven tendon of the base GeneralActuation), the tip "force", "moment" and
+``Robot`` names "tensions", "insertions" (one per tube) and "displacements" (one per
+displacement-driven tendon of the base Actuation), the tip "force", "moment" and
 "tip_mass", the base Loads' "point_force" and "point_moment", and its fields by name
 (fields.py: "sections[*].E", "tendons[3].offset", ...). A
 ``grid`` takes the product of axes; a ``batch`` zips columns of equal length. Results come back
@@ -33,50 +33,43 @@ from . import __version__, fields, general, status
 from .batch import Kernel, batch_solver, chunk_lanes, iter_batched, joined, mesh_for
 from .checkpoint import Partial, complete, digest
 from .checks import as_array, check_output, check_range
-from .description import GeneralRobot
-from .inputs import GeneralActuation, Loads
-from .loads import STANDARD_GRAVITY, Actuation, TipLoad, gravity_vector
+from .description import Robot
+from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
 from .mechanics import compliance_and_solution
 from .options import DEFAULT_SOLVER, SolverOptions
 from .results import SweepChunk, SweepResult, part_path
-from .robot import Robot
 from .shooting import RootInfo, compliance_at, force_scale, quick_root, unscaled
-from .solve import check_inputs, solution_at, solve, tip_angle, with_scene
+from .solve import problem, solution_at, solve, tip_angle
 
-INPUTS = ("tensions", "insertion", "force", "moment", "tip_mass")
-"""A Robot sweep's input names besides its fields."""
-GENERAL_INPUTS = ("tensions", "insertions", "displacements", "force", "moment", "tip_mass", "point_force", "point_moment")
-"""A GeneralRobot sweep's input names besides its fields."""
+INPUTS = ("tensions", "insertions", "insertion", "displacements", "force", "moment", "tip_mass", "point_force", "point_moment")
+"""A sweep's input names besides the robot's fields ("insertion": the one tube's depth of a robot with one)."""
 
 
 LOADS = {"tip_moment": "moment", "point_force": "point_force", "point_moment": "point_moment"}
-"""Loads fields a GeneralRobot sweep sets by name (the tip force: "force" plus the tip mass's weight)."""
-
-
-def _inputs(robot) -> tuple[str, ...]:
-    return GENERAL_INPUTS if isinstance(robot, GeneralRobot) else INPUTS
+"""Loads fields a sweep sets by name (the tip force: "force" plus the tip mass's weight)."""
 
 
 def _point_shape(name: str, robot, act, load) -> tuple[int, ...]:
-    if isinstance(robot, GeneralRobot):
-        k = load.n_points
-        shapes = dict(
-            tensions=(robot.n_tendons,), insertions=(robot.n_tubes,), displacements=(len(act.driven),),
-            point_force=(k, 3), point_moment=(k, 3),
-        )  # fmt: skip
-        if name in ("point_force", "point_moment") and not k:
-            raise ValueError(f"cannot sweep {name!r}: the base load has no point loads (give tdct.Loads(point_s=...))")
-        if name == "displacements" and not act.driven:
-            raise ValueError("cannot sweep 'displacements': no tendon is displacement-driven (the base act's driven=())")
-    else:
-        shapes = dict(tensions=(robot.n_tendons,), insertion=())
+    k = load.n_points
+    shapes = dict(
+        tensions=(robot.n_tendons,), insertions=(robot.n_tubes,), displacements=(len(act.driven),),
+        point_force=(k, 3), point_moment=(k, 3),
+    )  # fmt: skip
+    if robot.n_tubes == 1:
+        shapes["insertion"] = ()
+    elif name == "insertion":
+        raise ValueError(f"cannot sweep 'insertion': the robot has {robot.n_tubes} tubes; sweep 'insertions', one depth each")
+    if name in ("point_force", "point_moment") and not k:
+        raise ValueError(f"cannot sweep {name!r}: the base load has no point loads (give tdct.Loads(point_s=...))")
+    if name == "displacements" and not act.driven:
+        raise ValueError("cannot sweep 'displacements': no tendon is displacement-driven (the base act's driven=())")
     shapes |= dict(force=(3,), moment=(3,), tip_mass=())
     if name in shapes:
         return shapes[name]
     try:
         fields.check(robot, name)
     except ValueError as e:
-        raise ValueError(f"cannot sweep {name!r}: not an input ({', '.join(_inputs(robot))}) and {e}") from None
+        raise ValueError(f"cannot sweep {name!r}: not an input ({', '.join(INPUTS)}) and {e}") from None
     return ()
 
 
@@ -98,7 +91,7 @@ def _check_values(name: str, values, robot, act, load) -> np.ndarray:
     L = float(robot.length)
     if name in ("tensions", "tip_mass"):
         first_outside(0.0, math.inf, " N" if name == "tensions" else " kg")
-    if name == "tensions" and isinstance(robot, GeneralRobot):
+    if name == "tensions":
         for j, t in enumerate(robot.tendons):
             bad = np.flatnonzero(v[:, j] > (math.inf if t.max_tension is None else float(t.max_tension)))
             if bad.size:
@@ -107,7 +100,7 @@ def _check_values(name: str, values, robot, act, load) -> np.ndarray:
                 )
     elif name in ("insertion", "insertions"):
         first_outside(0.0, L, f" m (0 to the robot length {L:g} m)")
-    elif name not in _inputs(robot):
+    elif name not in INPUTS:
         for i in (int(np.argmin(v)), int(np.argmax(v))):
             try:
                 fields.replace(robot, {name: v[i]})
@@ -128,30 +121,20 @@ class Points(NamedTuple):
 def prepare(robot, act, load, grid, batch, *, gravity, solver, single=False, outputs: int = 0, scene=None) -> Points:
     """Defaults for the base configuration, its checks, and the points of ``grid`` or ``batch``.
 
-    A ``scene`` goes into the base Loads (``solve.with_scene``; a Robot becomes its general form).
+    A ``scene`` goes into the base Loads (``solve.with_scene``).
 
     With ``single`` and neither grid nor batch, the base configuration is the one point (shape ()).
     ``outputs``: bytes per point the caller keeps in memory (for ``check_points``).
     """
-    robot = Robot() if robot is None else robot
-    if scene is not None:
-        robot, act, load = with_scene(robot, act, load, scene, solver)
-    if isinstance(robot, GeneralRobot):
-        act = GeneralActuation(np.zeros(robot.n_tendons), np.zeros(robot.n_tubes)) if act is None else act
-        act, load = GeneralActuation.of(act, robot.n_tubes), Loads.of(load)
-        general.check_arguments(robot, act, load, solver)
-    else:
-        act = Actuation(np.zeros(robot.n_tendons)) if act is None else act
-        load = TipLoad() if load is None else load
-        check_inputs(robot, act, load, solver)
+    robot = Robot.paper() if robot is None else robot
+    robot, act, load = problem(robot, act, load, solver, scene)
     base = (robot, act, load, gravity_vector(gravity), solver)
     if single and grid is None and batch is None:
-        points = Points(base, {"insertion": np.asarray(act.insertion).reshape(1)}, (), None)
+        points = Points(base, {"insertions": np.asarray(act.insertions)[None]}, (), None)
     else:
         points = Points(base, *_columns(robot, act, load, grid, batch, outputs))
     p, g = points.points, base[3]
-    tip_force = load.force if isinstance(load, TipLoad) else load.tip_force
-    force = np.asarray(p.get("force", tip_force)) + np.multiply.outer(p.get("tip_mass", 0.0), np.asarray(g))
+    force = np.asarray(p.get("force", load.tip_force)) + np.multiply.outer(p.get("tip_mass", 0.0), np.asarray(g))
     robot.warn_outside_calibration(p.get("tensions", act.tensions), force)
     return points
 
@@ -228,15 +211,13 @@ def configure(base, point):
     """The robot, actuation and load of one point: the base with the point's values swapped in."""
     robot, act, load, gravity, _ = base
     robot = fields.replace(robot, {k: v for k, v in point.items() if _is_field(robot, k)})
-    if isinstance(robot, GeneralRobot):
-        got = {k: point.get(k, getattr(act, k)) for k in ("tensions", "insertions", "displacements")}
-        act = GeneralActuation(**got, driven=act.driven)
-        force = point.get("force", load.tip_force) + point.get("tip_mass", 0.0) * gravity
-        loads = {k: point.get(name, getattr(load, k)) for k, name in LOADS.items()}
-        return robot, act, dataclasses.replace(load, tip_force=force, **loads)
-    act = Actuation(point.get("tensions", act.tensions), point.get("insertion", act.insertion))
-    force = point.get("force", load.force) + point.get("tip_mass", 0.0) * gravity
-    return robot, act, TipLoad(force, point.get("moment", load.moment))
+    got = {k: point.get(k, getattr(act, k)) for k in ("tensions", "insertions", "displacements")}
+    if "insertion" in point:
+        got["insertions"] = jnp.reshape(point["insertion"], (1,))
+    act = Actuation._rebuild(got["tensions"], got["insertions"], got["displacements"], act.driven)
+    force = point.get("force", load.tip_force) + point.get("tip_mass", 0.0) * gravity
+    loads = {k: point.get(name, getattr(load, k)) for k, name in LOADS.items()}
+    return robot, act, dataclasses.replace(load, tip_force=force, **loads)
 
 
 def _is_field(robot, name: str) -> bool:
@@ -270,8 +251,7 @@ def _solve_point(base, point, kernel: Kernel, guess=None):
         out.update(s=sol.s, position=sol.position)
     if kernel.option("compliance"):
         out["compliance"] = C[:3, :3]
-    if isinstance(robot, GeneralRobot):
-        out["tensions"] = sol.tensions
+    out["tensions"] = sol.tensions
     return out
 
 
@@ -291,15 +271,14 @@ def _first_pass(robot, act, load, gravity, solver, kernel: Kernel):
         residual_norm=jnp.max(jnp.abs(found.residual)),
         base_wrench=unscaled(robot, found.x, F_c)[:6],
     )
-    general_driven = isinstance(robot, GeneralRobot) and act.driven
-    if kernel.option("shapes") or general_driven:
+    if kernel.option("shapes") or act.driven:
         sol = solution_at(
             robot, act, load, gravity, solver, found.x, RootInfo(found.iterations, out["stages"], found.result, None)
         )
     if kernel.option("shapes"):
         out.update(s=sol.s, position=sol.position)
-    if isinstance(robot, GeneralRobot):  # the tensions found for displacement-driven tendons, slack ones exactly 0
-        out["tensions"] = sol.tensions if general_driven else jnp.asarray(act.tensions, float)
+    # the tensions found for displacement-driven tendons, slack ones exactly 0
+    out["tensions"] = sol.tensions if act.driven else jnp.asarray(act.tensions, float)
     if kernel.option("compliance"):
         C = compliance_at(robot, act, load, gravity, solver, found.x)[:3, :3]
         out["compliance"] = jnp.where(found.result == status.SUCCESS, C, jnp.nan)
@@ -529,8 +508,8 @@ def sweep_chunks(robot=None, act=None, load=None, **options) -> Iterator[SweepCh
 
 
 def sweep(
-    robot: Robot | GeneralRobot | None = None,
-    act: Actuation | GeneralActuation | None = None,
+    robot: Robot | Robot | None = None,
+    act: Actuation | Actuation | None = None,
     load: TipLoad | Loads | None = None,
     *,
     grid: Mapping | None = None,
@@ -552,12 +531,12 @@ def sweep(
 
     Args:
         robot, act, load: the base configuration (defaults: Robot(), no tension, no tube, no tip
-            load). A GeneralRobot takes a GeneralActuation (default: no tension, tubes at 0) and
+            load). A Robot takes a Actuation (default: no tension, tubes at 0) and
             Loads (default: none), or an Actuation and a TipLoad.
         grid: {name: values}: every combination of the axes, first axis slowest. Values have a
             leading axis of points: "tensions" (k, n_tendons) [N], "insertion" (k,) [m], "force"
             and "moment" (k, 3) [N], [N m], "tip_mass" (k,) [kg] (weight added to the force),
-            or any scalar Robot field (k,). For a GeneralRobot "insertions" (k, n_tubes) [m],
+            or any scalar Robot field (k,). For a Robot "insertions" (k, n_tubes) [m],
             "displacements" (k, len(act.driven)) [m], "point_force" and "point_moment" (k, n, 3)
             (the base Loads' n point loads) instead of "insertion", and its fields by name
             (``tdct_jax.fields``: "sections[*].E" (k,) [Pa], "tendons[3].offset" (k,) [m], ...);

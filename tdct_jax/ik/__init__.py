@@ -43,11 +43,9 @@ import numpy as np
 
 from .. import status
 from ..checks import is_concrete
-from ..description import GeneralRobot
-from ..inputs import GeneralActuation, Loads
-from ..loads import STANDARD_GRAVITY, Actuation, TipLoad
+from ..description import Robot
+from ..inputs import STANDARD_GRAVITY, Actuation, Loads
 from ..options import DEFAULT_SOLVER, SolverOptions
-from ..robot import Robot
 from .arguments import _problem
 from .batched import _batched, _track
 from .driver import _solve_ik
@@ -66,7 +64,7 @@ from .problem import describe_task as describe_task
 
 
 def inverse_kinematics(
-    robot: Robot | GeneralRobot,
+    robot: Robot | Robot,
     target,
     *,
     load: TipLoad | Loads | None = None,
@@ -75,7 +73,7 @@ def inverse_kinematics(
     insertion=None,
     bounds: Bounds = DEFAULT_BOUNDS,
     objective=None,
-    guess: Actuation | GeneralActuation | None = None,
+    guess: Actuation | Actuation | None = None,
     ik: IKOptions = DEFAULT_IK,
     gravity=STANDARD_GRAVITY,
     solver: SolverOptions = DEFAULT_SOLVER,
@@ -84,18 +82,18 @@ def inverse_kinematics(
     """Tensions and insertion that put the tip at ``target`` (paper Secs. V.A, V.B; module docstring).
 
     Args:
-        robot: the paper's ``Robot`` or any ``GeneralRobot``.
+        robot: the paper's ``Robot`` or any ``Robot``.
         target: a Target (or a tip position [m], (3,)); a leading batch axis on its fields solves
             many targets at once (``jax.vmap``).
         load: tip force [N] and moment [N m], world frame, held while reaching; none by default.
-            For a GeneralRobot also ``Loads`` (one for every target).
-        tendons: the free tendons, numbered from 1 like the paper (a GeneralRobot's tendon i + 1
+            For a Robot also ``Loads`` (one for every target).
+        tendons: the free tendons, numbered from 1 like the paper (a Robot's tendon i + 1
             is its ``tendons[i]``): a number or a sequence (default all); the others keep the
-            tension ``guess`` gives them (default 0). A tendon that ``guess`` (a GeneralActuation)
+            tension ``guess`` gives them (default 0). A tendon that ``guess`` (a Actuation)
             lists in ``driven`` is free in its displacement, its tension found by the solve.
-        tubes: a GeneralRobot's free tubes, numbered from 1 (default all); the others keep the
+        tubes: a Robot's free tubes, numbered from 1 (default all); the others keep the
             depth ``guess`` gives them (default 0).
-        insertion: None (free) or a fixed insertion depth [m] (a GeneralRobot: every tube's, one
+        insertion: None (free) or a fixed insertion depth [m] (a Robot: every tube's, one
             depth or one per tube).
         bounds: Bounds on the free tensions [N], insertions [m] and displacements [m]; never
             violated (a driven tendon's tension is not bounded).
@@ -108,7 +106,7 @@ def inverse_kinematics(
             "stiffness", "tension" and "insertion" name the first three with their defaults.
             None: the first solution found. With no more free inputs than task coordinates
             there is nothing to choose: a ValueError says so.
-        guess: an Actuation (a GeneralRobot: a GeneralActuation) to start from (free inputs) and
+        guess: an Actuation (a Robot: a Actuation) to start from (free inputs) and
             to take the fixed inputs from.
         ik: ``IKOptions``: the method, the tolerance on the scaled task residual and the step
             limit (changing the numbers does not compile a new program).

@@ -11,10 +11,9 @@ import numpy as np
 
 from .. import general
 from ..checks import UnitWarning, array_module, as_array, check_choice, check_range, is_concrete, target_note, warn_user
-from ..description import GeneralRobot
-from ..inputs import GeneralActuation, Loads
-from ..loads import Actuation, TipLoad, gravity_vector
-from ..solve import check_inputs
+from ..description import Robot
+from ..inputs import Actuation, Loads, gravity_vector
+from ..solve import problem
 from .objectives import KINDS, SHORTHANDS
 from .options import IKOptions
 from .problem import (
@@ -50,7 +49,7 @@ def _problem(
     """Checks the arguments; returns (Problem, Plan, start v0, start unknowns (NaN))."""
     if not isinstance(target, Target):
         target = Target(target)
-    is_general = isinstance(robot, GeneralRobot)
+    is_general = isinstance(robot, Robot)
     batched = jnp.ndim(target.position) == 2
     n_t, n_tubes = robot.n_tendons, robot.n_tubes if is_general else 1
     L = float(robot.length) if is_concrete(robot.length) else robot.length
@@ -61,10 +60,10 @@ def _problem(
                 "load.scene is set: inverse kinematics with obstacles is not supported yet (the contact forces would be "
                 "more unknowns in every IK step); solve the forward problem with tdct.solve(..., scene=...)"
             )
-        base = GeneralActuation(np.zeros(n_t), np.zeros(n_tubes)) if guess is None else GeneralActuation.of(guess, n_tubes)
+        base = Actuation(np.zeros(n_t), np.zeros(n_tubes)) if guess is None else Actuation.of(guess, n_tubes)
         general.check_arguments(robot, base, load, solver)
     else:
-        load = TipLoad() if load is None else load
+        load = Loads() if load is None else load
         base = Actuation(np.zeros(n_t)) if guess is None else guess
         check_inputs(robot, base, load, solver, batch=batched)
     typed = tendons
@@ -87,7 +86,7 @@ def _problem(
         check_range("insertion", insertion, 0.0, L, unit=f" m (0 to the robot length {float(L):g} m)") if is_concrete(L) else None
         if is_general:
             depths = jnp.broadcast_to(insertion, (n_tubes,))
-            base = GeneralActuation._rebuild(base.tensions, depths, base.displacements, base.driven)
+            base = Actuation._rebuild(base.tensions, depths, base.displacements, base.driven)
         else:
             base = Actuation(base.tensions, insertion)
     if not tendons and not tubes:
@@ -183,7 +182,7 @@ def _free_tubes(tubes, insertion, n_tubes: int, is_general: bool) -> tuple:
         return () if insertion is not None else tuple(range(n_tubes))
     if not is_general:
         raise ValueError(
-            f"tubes = {tubes!r}: a tdct.Robot's one tube is free unless insertion= fixes it; tubes= is for a GeneralRobot"
+            f"tubes = {tubes!r}: a tdct.Robot's one tube is free unless insertion= fixes it; tubes= is for a Robot"
         )
     if insertion is not None:
         raise ValueError(f"tubes = {tubes!r} and insertion = {insertion!r}: give one (insertion= fixes every tube)")
@@ -210,10 +209,10 @@ def _free_tubes(tubes, insertion, n_tubes: int, is_general: bool) -> tuple:
 
 def _input_bounds(robot, base, plan: Plan, bounds: Bounds, ins_bounds, scale):
     """Bounds (lo, hi) of v: tensions over ``scale`` (each capped by its tendon's ``max_tension``
-    on a GeneralRobot), displacements over DISPLACEMENT_SCALE L, insertions over L."""
+    on a Robot), displacements over DISPLACEMENT_SCALE L, insertions over L."""
     L, k = robot.length, len(plan.tendons)
     lo, hi = [bounds.tension[0] / scale] * k, [bounds.tension[1] / scale] * k
-    if isinstance(robot, GeneralRobot):
+    if isinstance(robot, Robot):
         pulled, moved, _ = _split(base, plan)
         for j in pulled:
             cap = robot.tendons[plan.tendons[j]].max_tension

@@ -13,7 +13,7 @@ import numpy as np
 from jax import lax
 
 from .. import status
-from ..inputs import GeneralActuation
+from ..inputs import Actuation
 from ..newton import lazily
 from ..shooting import (
     RootInfo,
@@ -301,8 +301,8 @@ def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, tries=(0, STARTS), mode
             jacobians = jacobians_at_root(*problem, prob.solver, x, jacobians)
         J_res, (J_p, J_R) = jacobians
         C = tip_compliance(prob.robot, sol.tip_rotation, J_res, J_p, J_R, force_scale(*problem))
-    if isinstance(act, GeneralActuation):  # the driven tendons' tensions as found
-        act = GeneralActuation._rebuild(sol.tensions, act.insertions, act.displacements, act.driven)
+    if isinstance(act, Actuation):  # the driven tendons' tensions as found
+        act = Actuation._rebuild(sol.tensions, act.insertions, act.displacements, act.driven)
     position, orientation = pose_errors(sol.tip_position, sol.tip_rotation, prob.target)
     phi = jnp.nan if plan.objective is None else objective_value(sol, C, act, prob, plan)
     code = jnp.where(sol.result == status.SUCCESS, found.code, sol.result).astype(jnp.int32)

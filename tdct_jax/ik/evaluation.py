@@ -10,7 +10,7 @@ import jax.numpy as jnp
 from jax import lax
 
 from .. import general
-from ..inputs import GeneralActuation
+from ..inputs import Actuation
 from ..integrate import coupled
 from ..shooting import RootInfo, at_root, force_scale, load_columns, root, scaled, shoot, tip_compliance, unscaled
 from ..solve import solution_and_compliance
@@ -96,7 +96,7 @@ def _one_pass(x, v, F_c, prob: Problem, plan: Plan, taken=None):
 
     def objective(z):
         act = actuation_of(z[n:], prob, plan)
-        if isinstance(act, GeneralActuation):  # the driven tensions found
+        if isinstance(act, Actuation):  # the driven tensions found
             act = general.with_driven(act, z[:n], F_c)
         return objective_value(None, None, act, prob, plan)
 
@@ -142,7 +142,7 @@ def _through_solution(v, guess, prob: Problem, plan: Plan) -> Evaluation:
         sol = solution_and_compliance(*problem, guess, prob.solver)[0]
         x, code = scaled(prob.robot, _wrench(sol, act), F_c), sol.result
         e = task_residual(sol.tip_position, sol.tip_rotation, prob.target, prob.robot.length)
-        pulled = general.with_driven(act, x, F_c) if isinstance(act, GeneralActuation) else act  # the driven tensions found
+        pulled = general.with_driven(act, x, F_c) if isinstance(act, Actuation) else act  # the driven tensions found
         phi = objective_value(sol, None, pulled, prob, plan)
         return (e, phi), (e, phi, unscaled(prob.robot, x, F_c), code)
 

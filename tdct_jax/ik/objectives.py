@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..checks import as_array, is_concrete
-from ..loads import Actuation
+from ..inputs import Actuation
 from ..solve import Solution
 from ..tree import pytree, set_fields
 from .problem import Plan, Problem

@@ -12,11 +12,9 @@ import numpy as np
 
 from .. import status
 from ..checks import as_array, check_range, is_concrete
-from ..description import GeneralRobot
-from ..inputs import GeneralActuation, Loads
-from ..loads import Actuation, TipLoad
+from ..description import Robot
+from ..inputs import Actuation, Loads
 from ..options import SolverOptions
-from ..robot import Robot
 from ..solve import Solution, tip_angle
 from ..tree import pytree, set_fields, static
 from .options import IKOptions
@@ -89,10 +87,10 @@ class Bounds:
 
     Attributes:
         tension: (lowest, highest) tension of every free tendon [N], 0 <= lowest <= highest; on a
-            GeneralRobot a tendon's own ``max_tension`` lowers its highest.
+            Robot a tendon's own ``max_tension`` lowers its highest.
         insertion: (shallowest, deepest) insertion of every free tube [m] in [0, L]; None: (0, L).
         displacement: (lowest, highest) displacement of every free displacement-driven tendon of a
-            GeneralRobot [m]; None: (-L / 10, L / 10).
+            Robot [m]; None: (-L / 10, L / 10).
     """
 
     tension: tuple = (0.0, 10.0)
@@ -119,7 +117,7 @@ DEFAULT_BOUNDS = Bounds()
 class Plan(NamedTuple):
     """What is free (static): which tendons and which tubes (0-based; a ``Robot``'s one tube is
     tube 0, its insertion), which objective. v holds the free tendons' scaled tensions (or, for a
-    GeneralActuation's ``driven`` tendons, scaled displacements) in this order, then the tubes'."""
+    Actuation's ``driven`` tendons, scaled displacements) in this order, then the tubes'."""
 
     tendons: tuple
     tubes: tuple
@@ -133,7 +131,7 @@ class IKResult:
 
     Attributes:
         actuation: the tensions [N] and insertion [m] found (every bound holds); for a
-            GeneralRobot a GeneralActuation, its tensions those of the solution (the driven
+            Robot a Actuation, its tensions those of the solution (the driven
             tendons' included).
         solution: the forward Solution there (``solution.tip_position`` etc.).
         position_error: distance from the tip to the target position (over ``target.axes``) [m].
@@ -171,11 +169,11 @@ class IKResult:
 class Problem(NamedTuple):
     """Everything an IK step needs besides the free inputs v (a pytree; ``plan`` is static)."""
 
-    robot: Robot | GeneralRobot
+    robot: Robot | Robot
     target: Target
-    load: TipLoad | Loads  # Loads for a GeneralRobot
+    load: TipLoad | Loads  # Loads for a Robot
     gravity: jax.Array
-    base: Actuation | GeneralActuation  # values of the fixed inputs, by the robot's kind
+    base: Actuation | Actuation  # values of the fixed inputs, by the robot's kind
     lo: jax.Array  # bounds of v
     hi: jax.Array
     tension_scale: jax.Array  # [N] per unit of v
@@ -191,7 +189,7 @@ DISPLACEMENT_SCALE = 0.1
 
 def _split(base, plan: Plan):
     """Static positions in v of the free tendons driven by tension and of those driven by
-    displacement (a GeneralActuation's ``driven``), with the latter's places in ``displacements``."""
+    displacement (a Actuation's ``driven``), with the latter's places in ``displacements``."""
     driven = getattr(base, "driven", ())
     pulled = tuple(j for j, t in enumerate(plan.tendons) if t not in driven)
     moved = tuple(j for j, t in enumerate(plan.tendons) if t in driven)
@@ -199,7 +197,7 @@ def _split(base, plan: Plan):
 
 
 def actuation_of(v, prob: Problem, plan: Plan):
-    """The actuation (an Actuation, or a GeneralActuation for a GeneralRobot) with the free inputs
+    """The actuation (an Actuation, or a Actuation for a Robot) with the free inputs
     set from the scaled v."""
     k, base, L = len(plan.tendons), prob.base, prob.robot.length
     if isinstance(base, Actuation):
@@ -217,7 +215,7 @@ def actuation_of(v, prob: Problem, plan: Plan):
         displacements = displacements.at[np.array(places)].set(v[np.array(moved)] * (DISPLACEMENT_SCALE * L))
     if plan.tubes:
         insertions = insertions.at[np.array(plan.tubes)].set(v[k:] * L)
-    return GeneralActuation._rebuild(tensions, insertions, displacements, base.driven)
+    return Actuation._rebuild(tensions, insertions, displacements, base.driven)
 
 
 def scaled_inputs(act, prob: Problem, plan: Plan):
@@ -242,7 +240,7 @@ def scaled_inputs(act, prob: Problem, plan: Plan):
 
 
 def _wrench(sol, act):
-    """The shooting unknowns of a Solution, unscaled: its base wrench, then (a GeneralRobot's)
+    """The shooting unknowns of a Solution, unscaled: its base wrench, then (a Robot's)
     the displacement-driven tendons' tensions [N]."""
     if getattr(act, "driven", ()):
         return jnp.concatenate([sol.base_wrench, sol.tensions[np.array(act.driven)]])

@@ -10,9 +10,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from ..inputs import GeneralActuation
-from ..loads import Actuation
-from ..robot import Robot
+from ..inputs import Actuation
 from ..shooting import force_scale, shoot, straight_rod
 from .problem import Plan, Problem, _tip_force, actuation_of, scaled_inputs, task_residual
 
@@ -21,7 +19,7 @@ def default_start(prob: Problem, plan: Plan, p, force):
     """A start from the target position p [m] alone: the circular arc from the base (tangent +z)
     through p, less the sag that the tip force [N] and the robot's weight would cause on their own
     (a linear cantilever estimate), fixes a bending angle; the tendons on that side pull with the
-    tension whose moment bends the silicone so far, no tube. A GeneralRobot: its first section's
+    tension whose moment bends the silicone so far, no tube. A Robot: its first section's
     stiffness and density, every tendon as if anchored at the tip; free displacement-driven tendons
     start at the displacement ``prob.base`` gives."""
     robot = prob.robot
@@ -40,14 +38,14 @@ def default_start(prob: Problem, plan: Plan, p, force):
         v = jnp.concatenate(v)
     else:
         base = prob.base
-        v = scaled_inputs(GeneralActuation._rebuild(tensions, base.insertions, base.displacements, base.driven), prob, plan)
+        v = scaled_inputs(Actuation._rebuild(tensions, base.insertions, base.displacements, base.driven), prob, plan)
         v = v.at[k:].set(prob.lo[k:])
     return jnp.clip(v, prob.lo, prob.hi)
 
 
 def _arc_parameters(robot):
     """(bending stiffness [N m^2], linear density [kg/m], tendon angles [rad], offsets [m]) for
-    ``default_start``: a Robot's silicone, a GeneralRobot's first section (no channels)."""
+    ``default_start``: a Robot's silicone, a Robot's first section (no channels)."""
     if isinstance(robot, Robot):
         return (
             robot.bending_stiffness(False)[0],
