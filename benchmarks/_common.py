@@ -38,3 +38,31 @@ def write_result(path: str | Path, **fields) -> None:
     )
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     Path(path).write_text(json.dumps(result, indent=2) + "\n")
+
+
+def paper_section(robot) -> dict:
+    """The section of a one-section robot (``tdct.Robot.paper()``) as numpy floats (SI): E, G, the
+    body's area A and second moments I_x, I_y (tendon channels removed, each by the parallel-axis
+    theorem), its density rho, the tendons' body-frame positions r (n_tendons, 3) at the base and,
+    with a tube, the tube's bending stiffness EI_tube [N m^2] and mass per length rho_tube [kg/m]."""
+    from tdct_jax.description import channelled_second_moments, section_area
+
+    if len(robot.sections) != 1:
+        raise ValueError(f"a robot of one section expected, got {len(robot.sections)}")
+    sec = robot.sections[0]
+    r = np.array([np.asarray(t.position(0.0)[0], dtype=float) for t in robot.tendons]).reshape(-1, 3)
+    I_x, I_y = channelled_second_moments(sec.outer_diameter, sec.inner_diameter, sec.tendon_channel_diameter, r, 1.0)
+    E, nu = float(sec.E), float(sec.nu)
+    tube = robot.tubes[0] if robot.tubes else None
+    return dict(
+        L=float(robot.length),
+        E=E,
+        G=E / (2 * (1 + nu)),
+        A=float(section_area(sec, robot.n_tendons)),
+        I_x=float(I_x),
+        I_y=float(I_y),
+        rho=float(sec.density),
+        r=r,
+        EI_tube=0.0 if tube is None else float(tube.E * tube.second_moment),
+        rho_tube=0.0 if tube is None else float(tube.density * tube.area),
+    )

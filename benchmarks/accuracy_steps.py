@@ -85,7 +85,7 @@ def main() -> None:
     args = parser.parse_args()
     out = Path(__file__).parent / "results" / f"accuracy_steps{'_quick' if args.quick else ''}.json"
 
-    robot = tdct.Robot()
+    robot = tdct.Robot.paper()
     if args.quick:
         n_random, n_stressed, steps_list, reference_steps, repeats = 48, 16, (8, 16, 25), 200, 10
     else:
@@ -97,7 +97,7 @@ def main() -> None:
     reference, ok = tips(robot, batch, reference_steps)
     print(f"reference: {len(kind)} configurations at {reference_steps} steps per segment ({time.perf_counter() - start:.0f} s)")
 
-    act, load = tdct.Actuation((6.0, 0, 0, 0), 0.080), tdct.TipLoad.from_mass(0.020)
+    act, load = tdct.Actuation((6.0, 0, 0, 0), 0.080), tdct.Loads.from_mass(0.020)
     rows, worst = [], []
     for steps in steps_list:
         tip, converged = tips(robot, batch, steps)

@@ -8,7 +8,7 @@ on the six base unknowns N(0), M(0) with scipy.optimize.fsolve (MINPACK hybrd, f
 Jacobian) from the straight-rod guess, and the compliance by central differences of the tip
 position over the three tip-force components (step 1e-4 N, six more fsolves started from the
 converged base wrench). Only the section properties (stiffness diagonals, linear densities, tendon
-offsets) are taken from a tdct_jax.Robot, converted to numpy floats once.
+offsets) are taken from tdct_jax.Robot.paper(), converted to numpy floats once.
 
 For each configuration it solves with both, raises unless the tips agree to 1e-6 relative (same
 discretisation, same steps), and reports median wall-clock times of the baseline solve and FD
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import jax
 import numpy as np
-from _common import timings, write_result
+from _common import paper_section, timings, write_result
 from scipy.optimize import fsolve
 
 import tdct_jax as tdct
@@ -78,11 +78,14 @@ class Section:
     """One segment's section in numpy: K_se, K_bt diagonals, linear density, tendons."""
 
     def __init__(self, robot: tdct.Robot, tensions, backbone: bool):
-        self.K_se = np.asarray(robot.shear_stiffness(), dtype=float)
-        self.K_bt = np.asarray(robot.bending_stiffness(backbone), dtype=float)
-        self.rho = float(robot.linear_density(backbone))
+        p = paper_section(robot)
+        E, G, A, I_x, I_y = p["E"], p["G"], p["A"], p["I_x"], p["I_y"]
+        extra = p["EI_tube"] if backbone else 0.0  # the tube's E I in bending (eq. 30)
+        self.K_se = np.array([G * A, G * A, E * A])
+        self.K_bt = np.array([E * I_x + extra, E * I_y + extra, G * (I_x + I_y)])
+        self.rho = p["rho"] * A + (p["rho_tube"] if backbone else 0.0)
         self.tau = np.asarray(tensions, dtype=float)
-        self.r = np.asarray(robot.tendon_positions, dtype=float)
+        self.r = p["r"]
         self.rh = np.array([hat(r) for r in self.r])
         self.backbone = backbone
         self.m_straight = self.tau @ np.cross(self.r, E3)  # tendon moment of the straight rod
@@ -143,7 +146,7 @@ class Problem:
         self.L, self.d = float(robot.length), float(insertion)
         self.back, self.sil = Section(robot, tensions, True), Section(robot, tensions, False)
         self.force, self.moment = np.asarray(force, dtype=float), np.asarray(moment, dtype=float)
-        self.rho_tube = float(robot.tube_linear_density)
+        self.rho_tube = paper_section(robot)["rho_tube"]
         self.F_c = self._typical_force()
 
     def _typical_force(self):
@@ -223,7 +226,7 @@ def _timed(f, repeats):
 def compare(robot: tdct.Robot, name: str, steps: int, reps: dict) -> dict:
     """Solves one configuration with both, checks the agreement, times solve and compliance side by side."""
     tensions, insertion, force, moment = CONFIGS[name]
-    act, load = tdct.Actuation(tensions, insertion), tdct.TipLoad(force, moment)
+    act, load = tdct.Actuation(tensions, insertion), tdct.Loads(tip_force=force, tip_moment=moment)
     problem = Problem(robot, tensions, insertion, force, moment)
 
     (tip_np, wrench, nfev), np_solve_s = _timed(lambda: problem.solve(steps), reps["np_solve"])
@@ -277,7 +280,7 @@ def main(quick: bool, out: str | None = None) -> None:
     names = QUICK_CONFIGS if quick else tuple(CONFIGS)
     reps = dict(np_solve=1 if quick else 5, np_fd=1 if quick else 3, jax_solve=5 if quick else 30, jax_cm=3 if quick else 20)
     out = Path(out or Path(__file__).parent / "results" / ("baseline_quick.json" if quick else "baseline.json"))
-    robot = tdct.Robot()
+    robot = tdct.Robot.paper()
     t_start = time.perf_counter()
 
     compile_s, rows = {}, []

@@ -38,7 +38,7 @@ import jax, numpy as np
 import tdct_jax as tdct
 from tdct_jax import Target
 from tdct_jax.ik.driver import _solve_ik
-robot, load = tdct.Robot(), tdct.TipLoad.from_mass(0.01)
+robot, load = tdct.Robot.paper(), tdct.Loads.from_mass(0.01)
 def call(tip):
     return jax.block_until_ready({call})
 t = time.perf_counter(); call(np.array([0.0, 0.03, 0.14])); first = time.perf_counter() - t
@@ -70,7 +70,7 @@ def program_sizes() -> dict:
 
     jax.config.update("jax_enable_compilation_cache", False)
     sizes = {}
-    robot, load = tdct.Robot(), tdct.TipLoad.from_mass(0.01)
+    robot, load = tdct.Robot.paper(), tdct.Loads.from_mass(0.01)
     for name, objective in (("one target", None), ("one target, stiffness objective", "stiffness")):
         prob, plan, v0, wrench0 = _problem(
             **_arguments(robot, tdct.Target(np.array([0.0, 0.03, 0.14])), load=load, objective=objective)

@@ -44,7 +44,7 @@ def main() -> None:
     out, suffix = Path(__file__).parent / "results", "_quick" if args.quick else ""
     out.mkdir(parents=True, exist_ok=True)
 
-    robot = tdct.Robot()
+    robot = tdct.Robot.paper()
     t = time.perf_counter()
     jax.block_until_ready(tdct.compliance(robot, tdct.Actuation()))
     compile_s = time.perf_counter() - t
@@ -52,7 +52,7 @@ def main() -> None:
 
     rows = []
     for name, (tensions, insertion, mass) in CONFIGS.items():
-        act, load = tdct.Actuation(tensions, insertion), tdct.TipLoad.from_mass(mass)
+        act, load = tdct.Actuation(tensions, insertion), tdct.Loads.from_mass(mass)
         CM = np.asarray(tdct.compliance(robot, act, load))
         errors = []
         for h in STEPS_N:

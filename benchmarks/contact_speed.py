@@ -17,13 +17,13 @@ from _common import write_result
 
 import tdct_jax as tdct
 
-ROBOT = tdct.Robot().to_general()
-ACT = tdct.GeneralActuation([2.0, 0.0, 0.0, 0.0], [0.05])
+ROBOT = tdct.Robot.paper()
+ACT = tdct.Actuation([2.0, 0.0, 0.0, 0.0], [0.05])
 REPEATS = 30
 
 
 def act_at(t):
-    return ACT._rebuild(jnp.asarray(ACT.tensions).at[0].set(t), ACT.insertions, ACT.displacements, ())
+    return ACT._rebuild(jnp.asarray(ACT.tensions).at[0].set(t), ACT.insertions, ACT.displacements, ACT.driven)
 
 
 def timed(f, x):
@@ -85,7 +85,7 @@ def line_contact() -> list:
     into the plane) needs up to ~140 steps to find the contact set: max_iter = 300."""
     L, D = 0.3, 2e-3
     section = tdct.Section(end=L, outer_diameter=D, E=1e9, nu=0.3, density=0.0)
-    rod = tdct.GeneralRobot(L, (section,), ())
+    rod = tdct.Robot(L, (section,))
     w = 0.02  # N/m along -y; free tip deflection 26 mm
     load = tdct.Loads(distributed_force=(0.0, -w, 0.0))
     plane = tdct.Plane((0.0, -D / 2 - 1e-3, 0.0), (0.0, 1.0, 0.0))

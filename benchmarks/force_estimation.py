@@ -44,11 +44,11 @@ def statistics(errors) -> dict:
 
 
 def run(cases: int, axial_noise, points: int, lo: float, seed: int = 0) -> dict:
-    robot, rng = tdct.Robot().to_general(), np.random.default_rng(seed)
+    robot, rng = tdct.Robot.paper(), np.random.default_rng(seed)
     L = float(robot.length)
     loc, mag, z, seconds, failed = [], [], [], [], 0
     for _ in tqdm(range(cases), leave=False):
-        act = tdct.GeneralActuation(tensions=rng.uniform(0, 3, 4) * (rng.random(4) < 0.5), insertions=(rng.uniform(0, L),))
+        act = tdct.Actuation(rng.uniform(0, 3, 4) * (rng.random(4) < 0.5), rng.uniform(0, L))
         s, magnitude = rng.uniform(lo, 1.0) * L, rng.uniform(0.2, 0.5)
         exp, _ = synthesize(robot, act, s, magnitude, rng.uniform(0, 2 * np.pi), points=points, rng=rng)
         t = time.perf_counter()

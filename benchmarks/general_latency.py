@@ -1,12 +1,12 @@
-"""Warm single-solve latency of the paper robot as ``tdct.Robot`` and through the general path
-(``Robot().to_general()``), interleaved in one process, and of the two-segment six-tendon robot.
+"""Warm single-solve latency of the paper robot (``tdct.Robot.paper()``) and of the two-segment
+six-tendon robot, interleaved in one process.
 
 Run: python benchmarks/general_latency.py [--rounds 30] [--base PATH]
 With ``--base PATH`` (a copy of an earlier ``tdct_jax`` package renamed ``tdct_base``, in PATH),
-that version's ``tdct.Robot`` solve is timed in the same rounds: the side-by-side comparison of
-issue 23. Rounds alternate their order; each times 10 solves of each configuration. Medians and
-25th percentiles (the latter steadier on a shared machine). Writes
-benchmarks/results/general_latency.json.
+that version's paper-robot solve (its own API: ``tdct_base.Robot()``, ``TipLoad.from_mass``) is
+timed in the same rounds: the side-by-side comparison of issue 23. Rounds alternate their order;
+each times 10 solves of each configuration. Medians and 25th percentiles (the latter steadier on
+a shared machine). Writes benchmarks/results/general_latency.json.
 """
 
 from __future__ import annotations
@@ -27,10 +27,17 @@ PAPER = [((6.0, 0, 0, 0), 0.080, 0.020), ((3.0, 0, 0, 5.0), 0.120, 0.0)]
 TWO_SEGMENT = [1.5, 0.0, 0.4, 0.0, 0.8, 0.3]
 
 
-def paper_runner(mod, general: bool):
-    robot = mod.Robot().to_general() if general else mod.Robot()
-    cases = [(mod.Actuation(t, d), mod.TipLoad.from_mass(m)) for t, d, m in PAPER]
-    return [lambda a=a, ld=ld: mod.solve(robot, a, ld).position.block_until_ready() for a, ld in cases]
+def paper_runner():
+    robot = tdct.Robot.paper()
+    cases = [(tdct.Actuation(t, d), tdct.Loads.from_mass(m)) for t, d, m in PAPER]
+    return [lambda a=a, ld=ld: tdct.solve(robot, a, ld).position.block_until_ready() for a, ld in cases]
+
+
+def base_runner(base):
+    """The same solves by an earlier tdct_jax (``tdct_base``), in its own (former) API."""
+    robot = base.Robot()
+    cases = [(base.Actuation(t, d), base.TipLoad.from_mass(m)) for t, d, m in PAPER]
+    return [lambda a=a, ld=ld: base.solve(robot, a, ld).position.block_until_ready() for a, ld in cases]
 
 
 def main() -> None:
@@ -38,12 +45,12 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=30)
     parser.add_argument("--base", help="folder holding an earlier tdct_jax copied as package tdct_base")
     args = parser.parse_args()
-    runs = {"Robot": paper_runner(tdct, False), "Robot.to_general()": paper_runner(tdct, True)}
+    runs = {"Robot.paper()": paper_runner()}
     if args.base:
         sys.path.insert(0, args.base)
-        runs = {"base Robot": paper_runner(importlib.import_module("tdct_base"), False)} | runs
+        runs = {"base Robot": base_runner(importlib.import_module("tdct_base"))} | runs
     two = tdct.Robot.from_toml(ROBOTS / "two_segment.toml")
-    act = tdct.GeneralActuation(TWO_SEGMENT)
+    act = tdct.Actuation(TWO_SEGMENT)
     runs["two_segment.toml"] = [lambda: tdct.solve(two, act).position.block_until_ready()]
     compile_s = {}
     for name, fs in runs.items():

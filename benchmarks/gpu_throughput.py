@@ -111,10 +111,10 @@ def ik_rows(sizes, repeats: int) -> list[dict]:
     for n in sizes:
         points = envelope(n, seed=2)
         tips = tdct.sweep(batch=points, progress=False).tip_position
-        loads = tdct.TipLoad.from_mass(points["tip_mass"])
+        loads = tdct.Loads.from_mass(points["tip_mass"])
 
         def run(tips=tips, loads=loads):
-            return jax.block_until_ready(tdct.inverse_kinematics(tdct.Robot(), tdct.Target(tips), load=loads, throw=False))
+            return jax.block_until_ready(tdct.inverse_kinematics(tdct.Robot.paper(), tdct.Target(tips), load=loads, throw=False))
 
         t = time.perf_counter()
         result = run()

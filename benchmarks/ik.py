@@ -44,7 +44,7 @@ def main() -> None:
     args = parser.parse_args()
     n_path, n_batch, repeats = (20, 64, 5) if args.quick else (100, 512, 20)
     out = Path(__file__).parent / "results" / f"ik{'_quick' if args.quick else ''}.json"
-    robot, load = tdct.Robot(), tdct.TipLoad.from_mass(0.02)
+    robot, load = tdct.Robot.paper(), tdct.Loads.from_mass(0.02)
     tensions, insertions = path(n_path)
     tips = tdct.sweep(
         robot, tdct.Actuation(), load, batch={"tensions": tensions, "insertion": insertions}, progress=False

@@ -36,7 +36,7 @@ def main() -> None:
     robot = tdct.Robot.from_toml(ROBOTS / "two_segment.toml")
     rng = np.random.default_rng(23)
     tensions = rng.uniform(0, 3, (n, 6)) * (rng.random((n, 6)) < 0.5)
-    tips = np.stack([np.asarray(tdct.solve(robot, tdct.GeneralActuation(t, [])).tip_position) for t in tensions])
+    tips = np.stack([np.asarray(tdct.solve(robot, tdct.Actuation(t)).tip_position) for t in tensions])
     t = time.perf_counter()
     result = tdct.inverse_kinematics(robot, tdct.Target(tips), objective="tension", throw=False)
     total = time.perf_counter() - t

@@ -1,6 +1,6 @@
 """Peer: PyElastica's damped dynamics against tdct_jax's static solve on a tip-loaded cantilever.
 
-Problem: the default tdct_jax.Robot() as a plain silicone cantilever (no tube, no tension, no
+Problem: the paper robot tdct_jax.Robot.paper() as a plain silicone cantilever (no tube, no tension, no
 gravity) with a 5 mN tip force along -y. Reference: the small-deflection closed form of the rod
 both codes discretise (extensible, shearable, no shear coefficient), the Timoshenko cantilever
 delta = F L^3 / (3 E I_x) + F L / (G A); the script raises if tdct_jax differs from it by more
@@ -40,7 +40,7 @@ from pathlib import Path
 
 import jax
 import numpy as np
-from _common import timings, write_result
+from _common import paper_section, timings, write_result
 
 import tdct_jax as tdct
 
@@ -79,16 +79,8 @@ QUICK_GAMMA_FACTOR = 0.9
 
 def section(robot: tdct.Robot) -> dict:
     """tdct_jax's silicone section as floats (SI)."""
-    I_x, I_y = (float(i) for i in robot.second_moments_silicone)
-    return dict(
-        L=float(robot.length),
-        E=float(robot.E_silicone),
-        G=float(robot.G_silicone),
-        A=float(robot.area_silicone),
-        I_x=I_x,
-        I_y=I_y,
-        rho=float(robot.density_silicone),
-    )
+    p = paper_section(robot)
+    return {k: p[k] for k in ("L", "E", "G", "A", "I_x", "I_y", "rho")}
 
 
 def exact_deflection(sec: dict, force: float) -> float:
@@ -241,7 +233,7 @@ def run_pyelastica(sec: dict, exact: float, n: int, factors, repeats: int) -> di
 
 def run_tdct(robot: tdct.Robot, exact: float, repeats: int) -> dict:
     """Compile + first solve, warm solve latency, and the tip error against the closed form."""
-    act, load = tdct.Actuation(), tdct.TipLoad(force=(0.0, -FORCE, 0.0))
+    act, load = tdct.Actuation(), tdct.Loads(tip_force=(0.0, -FORCE, 0.0))
 
     def solve():
         return tdct.solve(robot, act, load, gravity=None)
@@ -290,7 +282,7 @@ def _main(quick: bool, out: str | None) -> None:
         return
     out = Path(out or Path(__file__).parent / "results" / ("peer_pyelastica_quick.json" if quick else "peer_pyelastica.json"))
     t_start = time.perf_counter()
-    robot = tdct.Robot()
+    robot = tdct.Robot.paper()
     sec = section(robot)
     exact = exact_deflection(sec, FORCE)
     print(

@@ -16,7 +16,7 @@ import numpy as np
 from _common import timings, write_result
 
 import tdct_jax as tdct
-from tdct_jax.shooting import force_scale, shoot, straight_rod
+from tdct_jax.rod import force_scale, shoot, straight_rod
 
 STEPS = tdct.SolverOptions().steps
 
@@ -27,8 +27,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=50)
     args = parser.parse_args()
 
-    robot = tdct.Robot()
-    act, load = tdct.Actuation((6.0, 0, 0, 0), 0.080), tdct.TipLoad.from_mass(0.020)
+    robot = tdct.Robot.paper()
+    act, load = tdct.Actuation((6.0, 0, 0, 0), 0.080), tdct.Loads.from_mass(0.020)
     gravity, solver = jnp.asarray(tdct.STANDARD_GRAVITY), tdct.SolverOptions(steps=args.steps)
     F_c = force_scale(robot, act, load, gravity)
     x0 = straight_rod(robot, act, load, gravity, F_c)

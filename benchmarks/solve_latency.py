@@ -6,9 +6,9 @@ Writes benchmarks/results/latency.json (latency_quick.json with --quick: 20 repe
 With --intervals 2,4,8: single against multiple shooting (SolverOptions.intervals) instead, side
 by side in one process, the variants alternated call by call: warm solves of CONFIGS[:3], a
 small vmapped batch, compile times, and the agreement with single shooting of tips, implicit
-derivatives d tip / d(tensions, insertion, E_silicone) and compliance; writes
+derivatives d tip / d(tensions, insertion, sections[*].E) and compliance; writes
 benchmarks/results/multiple_shooting.json (multiple_shooting_quick.json with --quick).
-With --general 7,14: the same for the shipped two-segment robot (a GeneralRobot with a point
+With --general 7,14: the same for the shipped two-segment robot (a Robot with a point
 load at 0.1 m and a point mass at 0.3 m: 7 breakpoint intervals, K dividing 7 x steps), by
 tensions and by displacements (four tendons driven), tips and compliance compared; writes
 benchmarks/results/multiple_shooting_general.json.
@@ -17,7 +17,6 @@ benchmarks/results/multiple_shooting_general.json.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import time
 from pathlib import Path
@@ -49,16 +48,16 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=STEPS)
     parser.add_argument("--quick", action="store_true", help="20 repeats")
     parser.add_argument("--intervals", help="compare single shooting with these K, e.g. 2,4,8")
-    parser.add_argument("--general", help="the same for the two-segment GeneralRobot, e.g. 7,14")
+    parser.add_argument("--general", help="the same for the two-segment robot, e.g. 7,14")
     args = parser.parse_args()
     repeats = 20 if args.quick else args.repeats
     if args.general:
-        return compare_general(args, repeats, [int(k) for k in args.general.split(",")])
+        return compare_general(args, repeats, [int(k) for k in args.rod.split(",")])
     if args.intervals:
         return compare_intervals(args, repeats, [int(k) for k in args.intervals.split(",")])
     out = Path(__file__).parent / "results" / f"latency{'_quick' if args.quick else ''}.json"
 
-    robot = tdct.Robot()
+    robot = tdct.Robot.paper()
     t0 = time.perf_counter()
     solver = tdct.SolverOptions(steps=args.steps)
     first = tdct.solve(robot, tdct.Actuation(), solver=solver)
@@ -68,7 +67,7 @@ def main() -> None:
 
     rows = []
     for name, (tensions, insertion, mass) in CONFIGS.items():
-        act, load = tdct.Actuation(tensions, insertion), tdct.TipLoad.from_mass(mass)
+        act, load = tdct.Actuation(tensions, insertion), tdct.Loads.from_mass(mass)
         sol = tdct.solve(robot, act, load, solver=solver)
         times = timings(lambda act=act, load=load: tdct.solve(robot, act, load, solver=solver).position, repeats)
         times_ms = times * 1e3
@@ -97,14 +96,15 @@ def main() -> None:
 
 
 def _derivatives(robot, act, load, solver):
-    """d tip position / d(tensions (4), insertion, E_silicone), (3, 6), by implicit differentiation."""
+    """d tip position / d(tensions (4), insertion, sections[*].E), (3, 6), by implicit differentiation."""
 
     def tip(v):
-        r = dataclasses.replace(robot, E_silicone=v[5])
+        r = robot.replace({"sections[*].E": v[5]})
         return tdct.solve(r, tdct.Actuation(v[:4], v[4]), load, solver=solver, throw=False).tip_position
 
-    v = jnp.concatenate([jnp.asarray(act.tensions, float), jnp.array([act.insertion, robot.E_silicone])])
-    return jax.jit(jax.jacfwd(tip))(v) * jnp.concatenate([jnp.ones(4), jnp.array([1.0, robot.E_silicone])])
+    E = robot.sections[0].E
+    v = jnp.concatenate([jnp.asarray(act.tensions, float), jnp.array([act.insertion, E])])
+    return jax.jit(jax.jacfwd(tip))(v) * jnp.concatenate([jnp.ones(4), jnp.array([1.0, E])])
 
 
 def _relative(a, b):
@@ -114,10 +114,10 @@ def _relative(a, b):
 def compare_intervals(args, repeats, Ks):
     """Single shooting against multiple shooting with each K in Ks, alternated call by call."""
     out = Path(__file__).parent / "results" / f"multiple_shooting{'_quick' if args.quick else ''}.json"
-    robot = tdct.Robot()
+    robot = tdct.Robot.paper()
     variants = {K: tdct.SolverOptions(steps=args.steps, intervals=K) for K in [1, *Ks]}
     configs = list(CONFIGS.items())[:3]
-    problems = [(name, tdct.Actuation(t, d), tdct.TipLoad.from_mass(m)) for name, (t, d, m) in configs]
+    problems = [(name, tdct.Actuation(t, d), tdct.Loads.from_mass(m)) for name, (t, d, m) in configs]
     compile_s = {}
     for K, solver in variants.items():
         t0 = time.perf_counter()
@@ -188,13 +188,13 @@ def compare_intervals(args, repeats, Ks):
 
 
 def compare_general(args, repeats, Ks):
-    """``compare_intervals`` for the two-segment GeneralRobot with a point load and a point mass."""
+    """``compare_intervals`` for the two-segment robot with a point load and a point mass."""
     out = Path(__file__).parent / "results" / f"multiple_shooting_general{'_quick' if args.quick else ''}.json"
-    robot = dataclasses.replace(tdct.Robot.from_toml(ROBOTS / "two_segment.toml"), masses=(tdct.PointMass(0.3, 0.005),))
+    robot = tdct.Robot.from_toml(ROBOTS / "two_segment.toml").replace(masses=(tdct.PointMass(0.3, 0.005),))
     load = tdct.Loads(tip_force=[0.02, 0, 0], point_s=[0.1], point_force=[[0.0, 0.05, -0.02]], point_moment=[[1e-3, 0, 5e-4]])
     acts = {
-        "by tensions": tdct.GeneralActuation([1.5, 0.0, 0.4, 0.0, 0.8, 0.3]),
-        "by displacements (tendons 0, 2, 4, 5)": tdct.GeneralActuation(
+        "by tensions": tdct.Actuation([1.5, 0.0, 0.4, 0.0, 0.8, 0.3]),
+        "by displacements (tendons 0, 2, 4, 5)": tdct.Actuation(
             np.zeros(6), displacements=[2e-3, 1e-3, 1e-3, 5e-4], driven=(0, 2, 4, 5)
         ),
     }

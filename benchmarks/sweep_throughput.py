@@ -15,11 +15,11 @@ difference between the two over the converged points, whether their result codes
 process's peak resident memory so far. Writes benchmarks/results/sweep_throughput[_quick].json.
 
 With ``--robots`` it measures instead, on one device, the engine's throughput for the paper robot
-as ``Robot`` and as ``Robot().to_general()`` on the same envelope points, and for the two-segment
-six-tendon robot (robots/two_segment.toml: random tensions 0-1.5 N on each tendon, tip masses
-0-5 g), alternately (issue 23: the general description must not slow the paper robot). With
-``--base PATH`` (a copy of an earlier tdct_jax renamed ``tdct_base``, in PATH) that version's
-``Robot`` sweep joins the rounds, with whether its tips equal today's bit for bit. Writes
+(``Robot.paper()``) and for the two-segment six-tendon robot (robots/two_segment.toml: random
+tensions 0-1.5 N on each tendon, tip masses 0-5 g), alternately. With ``--base PATH`` (a copy of
+an earlier tdct_jax renamed ``tdct_base``, in PATH) that version's paper-robot sweep (its own API:
+``tdct_base.Robot()``) joins the rounds on the same envelope points, with its largest tip
+difference from today's (issue 23: the one description must not slow the paper robot). Writes
 benchmarks/results/sweep_robots[_quick].json.
 """
 
@@ -127,16 +127,14 @@ def output_cost(robot, points, repeats: int, devices) -> list[dict]:
 
 
 def robot_sweeps(n: int, repeats: int, device, base_path: str | None) -> list[dict]:
-    """The paper robot's sweep as Robot and as Robot().to_general(), the two-segment robot's, and
-    with ``base_path`` an earlier version's Robot sweep, on the same points, alternately."""
+    """The paper robot's sweep, the two-segment robot's, and with ``base_path`` an earlier
+    version's paper-robot sweep (its former API), on the same points, alternately."""
     paper = envelope(n)
-    general = {k: v for k, v in paper.items() if k != "insertion"} | {"insertions": paper["insertion"][:, None]}
     rng = np.random.default_rng(1)
     two = {"tensions": rng.uniform(0, 1.5, (n, 6)), "tip_mass": rng.uniform(0, 0.005, n)}
     options = dict(progress=False, throw=False, devices=[device])
     runs = {
-        "Robot": lambda: tdct.sweep(tdct.Robot(), batch=paper, **options),
-        "Robot.to_general()": lambda: tdct.sweep(tdct.Robot().to_general(), batch=general, **options),
+        "Robot.paper()": lambda: tdct.sweep(tdct.Robot.paper(), batch=paper, **options),
         "two_segment.toml": lambda: tdct.sweep(tdct.Robot.from_toml(ROBOTS / "two_segment.toml"), batch=two, **options),
     }
     if base_path:
@@ -153,7 +151,7 @@ def robot_sweeps(n: int, repeats: int, device, base_path: str | None) -> list[di
             t = time.perf_counter()
             runs[name]()
             times[name].append(time.perf_counter() - t)
-    tips = results["Robot"].tip_position
+    tips = results["Robot.paper()"].tip_position
     rows = []
     for name, res in results.items():
         row = dict(robot=name, points=n, solves_per_s=n / float(np.median(times[name])), first_call_s=first[name])
@@ -173,7 +171,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one batch size, two chunk sizes, one repeat")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--robots", action="store_true", help="Robot, Robot.to_general() and two_segment.toml sweeps")
+    parser.add_argument("--robots", action="store_true", help="Robot.paper() and two_segment.toml sweeps")
     parser.add_argument("--base", help="with --robots: folder holding an earlier tdct_jax copied as package tdct_base")
     args = parser.parse_args()
     if "JAX_NUM_CPU_DEVICES" not in os.environ:  # before JAX starts its backend
@@ -191,7 +189,7 @@ def main() -> None:
             rows=rows,
         )
         return
-    robot = tdct.Robot()
+    robot = tdct.Robot.paper()
     devices = jax.devices()
     device_sets = [devices[:1]] + ([devices] if len(devices) > 1 else [])
     batches = (128,) if args.quick else (256, 1024, 4096)

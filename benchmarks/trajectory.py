@@ -75,7 +75,7 @@ def main() -> None:
     args = parser.parse_args()
     n = 200 if args.quick else 1000
     out = Path(__file__).parent / "results" / f"trajectory{'_quick' if args.quick else ''}.json"
-    robot, load = tdct.Robot(), tdct.TipLoad.from_mass(0.020)
+    robot, load = tdct.Robot.paper(), tdct.Loads.from_mass(0.020)
     tensions, insertions = trajectory(n)
     jax.block_until_ready(tdct.solve(robot, tdct.Actuation(tensions[0], insertions[0]), load).position)
 

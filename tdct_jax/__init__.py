@@ -3,13 +3,13 @@
 import jax
 
 from .compiler import use_fast_compile_flags
-
-__version__ = "0.1.0"
+from .version import __version__ as __version__
 
 use_fast_compile_flags()
 jax.config.update("jax_enable_x64", True)
 
-from . import checks, fields  # noqa: E402
+from . import checks  # noqa: E402
+from . import fields as fields  # noqa: E402
 from . import status as status  # noqa: E402
 from .calibrate import Calibration as Calibration  # noqa: E402
 from .calibrate import calibrate as calibrate  # noqa: E402

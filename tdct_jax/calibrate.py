@@ -1,9 +1,9 @@
 """Calibration of robot fields from measured shapes (paper Sec. III.B), and synthetic shape data.
 
 The paper fits the silicone's Young's modulus by minimising the error between five measured shapes
-and the model. Here any subset of a robot's scalar fields (``fields.py``: the paper Robot's
-"E_silicone", ..., a Robot's "sections[*].E", "tendons[0].offset", ...) is fitted to any
-number of experiments by Levenberg-Marquardt on the point-wise shape residuals, with the Jacobian
+and the model. Here any subset of any robot's scalar fields (``fields.py``: "sections[*].E",
+"tendons[0].offset", "tubes[0].E", ...; the paper's former names such as "E_silicone" resolve with
+a FutureWarning) is fitted to any number of experiments by Levenberg-Marquardt on the point-wise shape residuals, with the Jacobian
 exact (forward-mode autodiff through the implicitly differentiated shooting solution, vmapped over
 experiments).
 """
@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from . import fields, general, status
+from . import fields, status
 from .checks import check_integer
 from .data import Experiment, stack
 from .description import Robot
@@ -94,7 +94,7 @@ class Calibration:
     values: dict
     std_errors: dict
     correlation: np.ndarray
-    robot: Robot | Robot
+    robot: Robot
     names: tuple
     rmse_before: np.ndarray
     rmse_after: np.ndarray
@@ -165,9 +165,9 @@ class Calibration:
 
 
 def calibrate(
-    robot: Robot | Robot,
+    robot: Robot,
     experiments: Sequence[Experiment],
-    params: Sequence[str] = ("E_silicone",),
+    params: Sequence[str] = ("sections[*].E",),
     *,
     max_steps: int = 30,
     xtol: float = 1e-8,
@@ -184,14 +184,14 @@ def calibrate(
     (Poisson ratios, tendon angles and twists are fitted as they are).
 
     Args:
-        robot: the robot (a Robot or a Robot) with the starting values of ``params`` and
-            every other field fixed.
-        experiments: measured shapes and their conditions (``tdct_jax.data.read_experiments``);
-            for a Robot their actuations are GeneralActuations (or Actuations of its one
-            tube) and their loads Loads or TipLoads.
-        params: field names to fit (``fields.names``): for a Robot e.g. ("E_silicone",
-            "tendon_offset"), for a Robot e.g. ("sections[*].E", "tendons[0].offset"),
-            "[*]" fitting one value shared by every item; a single name may be given as a string.
+        robot: the robot with the starting values of ``params`` and every other field fixed.
+        experiments: measured shapes and their conditions (``tdct_jax.data.read_experiments``):
+            Actuations (empty tensions or insertions: zeros of the robot's counts) and Loads.
+        params: field names to fit (``fields.names``), e.g. ("sections[*].E",
+            "tendons[*].offset"), "[*]" fitting one value shared by every item; a single name may
+            be given as a string. The default fits one modulus for the whole body. The paper's
+            former names ("E_silicone", "tendon_offset", ...) resolve with a FutureWarning; the
+            Calibration keeps the names as given.
         max_steps: most Levenberg-Marquardt trial steps (the fit's own limit).
         xtol: converged when the Gauss-Newton step changes no field by more than this (relative
             for log-space fields, absolute for Poisson ratios): the fit's own tolerance.
@@ -274,7 +274,7 @@ def _as_names(params) -> tuple:
         raise ValueError(f"params = {params!r} must be a Robot field name or a sequence of them") from None
 
 
-def _check_params(robot: Robot | Robot, params: tuple) -> None:
+def _check_params(robot: Robot, params: tuple) -> None:
     if not params or len(set(params)) != len(params):
         raise ValueError(f"params = {params!r} must name at least one Robot field, each once")
     check_params(robot, params)
@@ -283,27 +283,22 @@ def _check_params(robot: Robot | Robot, params: tuple) -> None:
             raise ValueError(f"{p} = {fields.value(robot, p):g} must start positive: it is fitted in log space")
 
 
-def _checked_experiments(robot: Robot | Robot, experiments: list, solver: SolverOptions) -> list:
-    """The experiments checked against the robot; for a Robot with their actuations and
-    loads as Actuation and Loads."""
-    if not isinstance(robot, Robot):
-        for e in experiments:
-            check_inputs(robot, e.act, e.load, solver)
-        return experiments
+def _checked_experiments(robot: Robot, experiments: list, solver: SolverOptions) -> list:
+    """The experiments checked against the robot (``solve.problem``), with their actuations'
+    defaults filled in (``Actuation.of``)."""
     out = []
     for e in experiments:
-        act, load = Actuation.of(e.act, robot.n_tubes), Loads.of(e.load)
-        general.check_arguments(robot, act, load, solver)
+        _, act, load = problem(robot, e.act, e.load, solver)
         out.append(dataclasses.replace(e, act=act, load=load))
     return out
 
 
 def synthesize(
-    robot: Robot | Robot,
-    actuations: Sequence[Actuation | Actuation],
+    robot: Robot,
+    actuations: Sequence[Actuation],
     *,
     tip_masses: Sequence[float] | None = None,
-    loads: Sequence[TipLoad | Loads] | None = None,
+    loads: Sequence[Loads] | None = None,
     n_points: int = FBG_POINTS,
     noise: float = 1e-4,
     seed: int = 0,
@@ -315,11 +310,10 @@ def synthesize(
     coordinate (numpy's default generator seeded with ``seed``).
 
     Args:
-        robot: the robot that "is measured" (a Robot or a Robot).
-        actuations: one Actuation (or, for a Robot, Actuation) per experiment.
+        robot: the robot that "is measured".
+        actuations: one Actuation per experiment.
         tip_masses: tip mass per experiment [kg] (default none).
-        loads: further loads per experiment, world frame (default none): TipLoads, or for a
-            Robot also Loads.
+        loads: further loads per experiment, world frame (Loads; default none).
         n_points: points per shape (>= 2).
         noise: noise standard deviation [m] (>= 0).
         seed: random seed.
@@ -339,6 +333,7 @@ def synthesize(
     if not (np.isfinite(noise) and noise >= 0):
         raise ValueError(f"noise = {noise!r} must be a finite standard deviation >= 0 [m]")
     s = np.linspace(0.0, float(robot.length), n_points)
+    actuations = [Actuation.of(a, robot) for a in actuations]
     exact = [
         Experiment(s, np.zeros((n_points, 3)), a, ld, m, name=condition_name(a, m))
         for a, ld, m in zip(actuations, loads, tip_masses, strict=True)
@@ -354,16 +349,14 @@ def synthesize(
     ]
 
 
-def condition_name(act: Actuation | Actuation, tip_mass: float = 0.0) -> str:
-    """A file-name-safe label of a measurement condition, e.g. "t6-0-0-0N_d80mm_m20g"; a
-    Actuation's lists every tube's depth and the driven tendons' displacements, e.g.
+def condition_name(act: Actuation, tip_mass: float = 0.0) -> str:
+    """A file-name-safe label of a measurement condition, e.g. "t6-0-0-0N_d80mm_m20g": the
+    tensions, the driven tendons' displacements and every tube's depth, e.g.
     "t0-0.4N_x3-1mm_d80-20mm_m0g" (displacements 3 and 1 mm, tubes at 80 and 20 mm)."""
 
     def joined(values, scale=1.0):
         return "-".join(f"{v * scale:g}" for v in np.asarray(values, dtype=float))
 
-    if not isinstance(act, Actuation):
-        return f"t{joined(act.tensions)}N_d{float(act.insertion) * 1e3:g}mm_m{float(tip_mass) * 1e3:g}g"
     moved = f"_x{joined(act.displacements, 1e3)}mm" if act.driven else ""
     depths = f"_d{joined(act.insertions, 1e3)}mm" if np.size(act.insertions) else ""
     return f"t{joined(act.tensions)}N{moved}{depths}_m{float(tip_mass) * 1e3:g}g"

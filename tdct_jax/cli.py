@@ -16,17 +16,17 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from . import __version__, fields, general, status
+from . import fields, rod, status
 from .checks import UnitWarning, check_output, interval, target_note
-from .description import Robot
+from .description import CalibrationWarning, Robot
 from .ik import MAX_STEPS as IK_MAX_STEPS
 from .inputs import STANDARD_GRAVITY, Actuation, Loads
 from .mechanics import compliance, compliance_ellipsoid
 from .options import MAX_ITER, STEPS, SolverOptions
-from .description import CalibrationWarning
 from .scene import read_scene
 from .solve import check_solution, solve
 from .status import ConvergenceError
+from .version import __version__
 
 COMPILE_CACHE_ENV = "TDCT_COMPILE_CACHE"
 """Environment variable: a folder for the CLI's compilation cache, or 0 / off for none."""
@@ -173,7 +173,8 @@ def _parser() -> argparse.ArgumentParser:
     described.add_argument(
         "--robot",
         metavar="robot.toml",
-        help="robot file, SI units: Robot fields, or any robot described by [[sections]] (docs/robot-file.md)",
+        help="robot file, SI units: the paper's robot with Table II values by name (E_silicone = 1.1e6), or any robot "
+        "described by [[sections]] (docs/robot-file.md)",
     )
     described.add_argument(
         "--set",
@@ -181,8 +182,8 @@ def _parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="FIELD=VALUE",
-        help="override one robot field, SI units (E_silicone=1.1e6; for a robot file with [[sections]]: "
-        "sections[*].E=60e9, tendons[0].offset=0.012); repeatable, applied after --robot",
+        help="override one robot field by its name, SI units (sections[*].E=1.1e6, tendons[0].offset=0.012, "
+        "tubes[0].E=60e9, length=0.2); repeatable, applied after --robot",
     )
     described.add_argument("--steps", type=int, default=STEPS, help=f"RK4 steps per segment (default {STEPS})")
     described.add_argument(
@@ -330,7 +331,7 @@ def _parser() -> argparse.ArgumentParser:
     k = verbs.add_parser(
         "calibrate",
         parents=[described],
-        help="fit Robot fields to measured shape files (Sec. III.B), or a robot on its rig to a recording (--dataset)",
+        help="fit robot fields to measured shape files (Sec. III.B), or a robot on its rig to a recording (--dataset)",
     )
     k.add_argument("files", nargs="*", metavar="FILE", help="shape files (CSV, see tdct_jax.data) or folders of them")
     k.add_argument(
@@ -341,7 +342,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     k.add_argument(
         "--params",
-        help="comma-separated fields to fit (default E_silicone; with --dataset "
+        help="comma-separated fields to fit (default sections[*].E; with --dataset "
         "sections[*].E, scale, rotation[0-1], translation[0-2]; names: docs/recordings.md)",
     )
     k.add_argument("--every", type=int, default=1, help="with --dataset: fit every Nth training sample (default 1: all)")
@@ -391,15 +392,10 @@ def _check_output(dest: str, flag: str, path) -> None:
     check_output(flag, path, suffixes=formats, kind="an image format matplotlib writes")
 
 
-def _robot(args, general: bool = False) -> Robot | Robot:
-    """The robot of --robot (default: the paper's) with the --set fields replaced (fields.py names);
-    a robot file with [[sections]] (a Robot) only for the verbs that take one (``general``)."""
-    robot = Robot.from_toml(args.robot) if args.robot else Robot()
-    if isinstance(robot, Robot) and not general:
-        raise ValueError(
-            f"--robot {args.robot}: tdct {args.verb} takes the paper's robot only so far (a file of Robot fields); "
-            "a robot file with [[sections]] works with tdct solve, tdct compliance and tdct ik"
-        )
+def _robot(args) -> Robot:
+    """The robot of --robot (default: the paper's, ``Robot.paper()``) with the --set fields
+    replaced (fields.py names)."""
+    robot = Robot.from_toml(args.robot) if args.robot else Robot.paper()
     try:
         return fields.replace(robot, dict(getattr(args, "set", [])))
     except ValueError as e:
@@ -422,19 +418,15 @@ def _check_tensions(flag: str, tensions, robot: Robot) -> None:
 
 
 def _inputs(args):
-    """Robot, actuation, load and solve options from the shared flags, checked in the units typed.
-    The paper's Robot becomes its Robot (``Robot.to_general``) for the flags only a
-    Robot takes (--displacements-mm, --point-load)."""
-    robot = _robot(args, general=True)
+    """Robot, actuation, load and solve options from the shared flags, checked in the units typed."""
+    robot = _robot(args)
     solver = _solver(args)
-    if isinstance(robot, Robot) and (args.displacements_mm or args.point_load):
-        robot = robot.to_general()
     n_t, length_mm = robot.n_tendons, 1e3 * float(robot.length)
     if args.tensions is not None and n_t == 0:
         raise ValueError(f"--tensions {','.join(f'{t:g}' for t in args.tensions)}: the robot has no tendons; leave it out")
     tensions = args.tensions if args.tensions is not None else (0.0,) * n_t
     _check_tensions("--tensions", tensions, robot)
-    n_tubes = robot.n_tubes if isinstance(robot, Robot) else 1
+    n_tubes = robot.n_tubes
     if args.insertions_mm is not None:
         flag, depths = "--insertions-mm", args.insertions_mm
         check_count(flag, depths, n_tubes, f"the robot has {n_tubes} tubes, one depth each")
@@ -447,12 +439,10 @@ def _inputs(args):
     check_flag(flag, depths, 0.0, length_mm, " mm")
     if args.tip_mass_g is not None:
         check_flag("--tip-mass-g", args.tip_mass_g, 0.0, unit=" g")
-        tip_force = Loads.from_mass(args.tip_mass_g * 1e-3).force
+        tip_force = Loads.from_mass(args.tip_mass_g * 1e-3).tip_force
     else:
         tip_force = args.tip_force or (0.0, 0.0, 0.0)
     options = dict(gravity=_gravity(args), solver=solver)
-    if isinstance(robot, Robot):
-        return robot, Actuation(tensions, depths[0] * 1e-3), TipLoad(tip_force, args.tip_moment), options
     pulled = args.displacements_mm or ()
     _check_displacements(pulled, robot)
     for s_mm, force in args.point_load:
@@ -466,7 +456,7 @@ def _inputs(args):
 
 def _check_displacements(pulled, robot: Robot) -> None:
     """--displacements-mm: known tendons, each once, each less than its length from the base to its
-    anchor in the straight robot (``general.check_arguments`` checks the same in SI units)."""
+    anchor in the straight robot (``rod.check_arguments`` checks the same in SI units)."""
     if not pulled:
         return
     typed = "--displacements-mm " + ",".join(f"{i}:{d:g}" for i, d in pulled)
@@ -475,7 +465,7 @@ def _check_displacements(pulled, robot: Robot) -> None:
         raise ValueError(f"{typed}: the robot has no tendons")
     if not all(1 <= i <= robot.n_tendons for i in numbers) or len(set(numbers)) != len(numbers):
         raise ValueError(f"{typed}: tendon numbers, each once, 1 to {robot.n_tendons}")
-    reach = 1e3 * np.asarray(general.rest_lengths(robot))
+    reach = 1e3 * np.asarray(rod.rest_lengths(robot))
     for i, d in pulled:
         if not d < reach[i - 1]:
             raise ValueError(
@@ -533,8 +523,6 @@ def _solve_command(args) -> int:
     scene = None
     if args.scene:
         scene = read_scene(args.scene)
-        if isinstance(robot, Robot):  # contact is solved on the general description (solve does the same)
-            robot, act, load = robot.to_general(), Actuation.of(act, 1), Loads.of(load)
         try:
             scene.check_base(float(robot.sections[0].outer_diameter) / 2)
         except ValueError as e:
@@ -543,13 +531,11 @@ def _solve_command(args) -> int:
     tip_mm = np.asarray(sol.tip_position) * 1e3
     angle = float(np.degrees(sol.tip_angle))
     converged, res, iters = bool(sol.converged), float(sol.residual_norm), int(sol.iterations)
-    tendons = {}
-    if isinstance(robot, Robot):
-        tendons = dict(
-            tensions_N=np.asarray(sol.tensions).tolist(),
-            displacements_mm=(np.asarray(sol.displacements) * 1e3).tolist(),
-            slack=np.asarray(sol.slack).tolist(),
-        )
+    tendons = dict(
+        tensions_N=np.asarray(sol.tensions).tolist(),
+        displacements_mm=(np.asarray(sol.displacements) * 1e3).tolist(),
+        slack=np.asarray(sol.slack).tolist(),
+    )
     if args.json:
         shape = {"s_mm": (np.asarray(sol.s) * 1e3).tolist(), "position_mm": (np.asarray(sol.position) * 1e3).tolist()}
         out = dict(
@@ -578,12 +564,9 @@ def _solve_command(args) -> int:
         table = np.column_stack([np.asarray(sol.s), np.asarray(sol.position)]) * 1e3
         np.savetxt(args.csv, table, delimiter=",", header="s_mm,x_mm,y_mm,z_mm", comments="", fmt="%.9g")
     if args.plot:
-        from .plotting import plot_robot, plot_shape
+        from .plotting import plot_robot
 
-        if isinstance(robot, Robot):
-            plot_robot(sol, robot, act, Loads.of(load).with_scene(scene), args.plot, title=_conditions(args, act))
-        else:
-            plot_shape(sol, act.insertion, args.plot, title=_conditions(args, act))
+        plot_robot(sol, robot, act, load.with_scene(scene), args.plot, title=_conditions(args, act))
     check_solution(sol, options["solver"], True)
     return 0
 
@@ -690,8 +673,13 @@ def _calibrate_command(args) -> int:
         raise ValueError("tdct calibrate takes shape files (FILE ...), or --dataset with --out and --every")
     robot = _robot(args)
     solver = _solver(args)
+    params = _names(args.params or "sections[*].E")
+    for p in params:  # before any file is read
+        try:
+            fields.check(robot, p)
+        except ValueError as e:
+            raise ValueError(f"--params: {e}") from None
     experiments = read_experiments(args.files, robot)
-    params = _names(args.params or "E_silicone")
     options = dict(gravity=_gravity(args), solver=solver)
     fit = calibrate(robot, experiments, params, max_steps=args.max_steps, progress=not args.quiet, throw=False, **options)
     print(json.dumps(fit.to_dict()) if args.json else fit.summary())
@@ -763,18 +751,16 @@ def _calibrate_rig_command(args) -> int:
 
 
 def _depths_mm(act) -> dict:
-    """The tube depth of an actuation in mm, for output: ``insertion_mm`` (the paper robot's
-    Actuation) or ``insertions_mm``, one per tube (a Actuation)."""
-    if isinstance(act, Actuation):
-        return dict(insertions_mm=(1e3 * np.asarray(act.insertions)).tolist())
-    return dict(insertion_mm=1e3 * float(act.insertion))
+    """The tube depths of an actuation in mm, for output: ``insertions_mm``, one per tube, and for
+    a robot with one tube its depth as ``insertion_mm`` too."""
+    depths = (1e3 * np.asarray(act.insertions)).tolist()
+    return dict(insertions_mm=depths) | (dict(insertion_mm=depths[0]) if len(depths) == 1 else {})
 
 
 def _ik_command(args) -> int:
     from . import ik
 
-    robot = _robot(args, general=True)
-    general_robot = isinstance(robot, Robot)
+    robot = _robot(args)
     solver = _solver(args)
     length_mm = 1e3 * float(robot.length)
     check_flag("--max-tension-n", args.max_tension_n, 0.0, unit=" N")
@@ -807,7 +793,7 @@ def _ik_command(args) -> int:
         )
         if note:
             warnings.warn(note, UnitWarning, stacklevel=1)
-    n_tubes = robot.n_tubes if general_robot else 1
+    n_tubes = robot.n_tubes
     free = (robot.n_tendons if tendons is None else len(tendons)) + n_tubes * (args.insertion_mm is None)
     if args.objective is not None and free <= target.size:
         tubes = "" if not n_tubes else " and the tube" if n_tubes == 1 else f" and the {n_tubes} tubes"
@@ -874,13 +860,10 @@ def _ik_command(args) -> int:
         if "compliance_along_direction_mm_per_N" in out:
             print(f"compliance along the direction [mm/N]: {out['compliance_along_direction_mm_per_N']:.3f}")
     if args.plot:
-        from .plotting import plot_robot, plot_shape
+        from .plotting import plot_robot
 
         title = f"IK to ({', '.join(f'{x:g}' for x in args.target_mm)}) mm: {out['status']}"
-        if general_robot:
-            plot_robot(result.solution, robot, result.actuation, load, args.plot, title=title)
-        else:
-            plot_shape(result.solution, float(result.actuation.insertion), args.plot, title=title, target=target.position)
+        plot_robot(result.solution, robot, result.actuation, load, args.plot, title=title, target=target.position)
     if code not in (status.SUCCESS,):
         advice = status.message(code, cli=True, what="the inverse kinematics", max_steps=args.max_steps)
         print(f"tdct: error: {advice}", file=sys.stderr)
@@ -953,15 +936,16 @@ def _fail(error, code: int) -> int:
 
 @contextlib.contextmanager
 def _notes():
-    """Prints CalibrationWarnings (inputs outside the calibrated range) and UnitWarnings (values
-    far outside any robot's, as if typed in another unit) as one-line notes on stderr."""
+    """Prints CalibrationWarnings (inputs outside the calibrated range), UnitWarnings (values far
+    outside any robot's, as if typed in another unit) and FutureWarnings (a former name typed,
+    such as --set E_silicone=...) as one-line notes on stderr."""
     with warnings.catch_warnings():
         warnings.simplefilter("always", CalibrationWarning)
         warnings.simplefilter("always", UnitWarning)
         show, shown = warnings.showwarning, set()
 
         def note(message, category, *rest, **kw):
-            if issubclass(category, (CalibrationWarning, UnitWarning)):
+            if issubclass(category, (CalibrationWarning, UnitWarning, FutureWarning)):  # FutureWarning: a former name
                 if str(message) not in shown:  # once each, though the robot is rebuilt along the way
                     print(f"tdct: note: {message}", file=sys.stderr)
                     shown.add(str(message))

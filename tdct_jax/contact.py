@@ -4,7 +4,7 @@
 Contact candidates sit at every ``scene.every``-th RK4 node along the body (not the base) and at
 the tip: n_c = ceil(P steps / every) of them for P breakpoint intervals of ``steps`` RK4 steps
 (static). The integration pieces are cut so that each interior candidate is a piece start
-(``general.pieces``). At candidate j and obstacle o the unknown normal force lambda_jo >= 0 pushes
+(``rod.pieces``). At candidate j and obstacle o the unknown normal force lambda_jo >= 0 pushes
 the centreline point p_j along the obstacle's outward normal n_o(p_j), a point force
 
     N(s_j+) = N(s_j-) - F_j,   F_j = sum_o lambda_jo n_o(p_j),   M continuous,
@@ -16,7 +16,7 @@ unknown, lambda_jo / F_c, and one residual row, Fischer and Burmeister's
     phi(a, b) = a + b - sqrt(a^2 + b^2),   a = lambda_jo / F_c,   b = g_jo / L,
 
 zero iff a >= 0, b >= 0 and a b = 0: the force pushes, the body does not penetrate, and only a
-touching point carries force (the same function ``general.closing`` uses for slack tendons).
+touching point carries force (the same function ``rod.closing`` uses for slack tendons).
 Newton starts contact free (lambda = 0). A candidate inside a zero-length breakpoint interval
 (e.g. a tube at depth 0) shares its point with the next one: its row is a itself (no force).
 """
@@ -58,7 +58,7 @@ class Contact(NamedTuple):
 
 
 class Starts(NamedTuple):
-    """What ``general.integrate`` records at each piece's start: the position [m] (3,) and the
+    """What ``rod.integrate`` records at each piece's start: the position [m] (3,) and the
     gaps to every obstacle [m] (n_o,)."""
 
     p: jax.Array
@@ -80,17 +80,8 @@ def n_candidates(P: int, steps: int, every: int) -> int:
     return (P * steps - 1) // every + 1
 
 
-def n_unknowns(robot, load, steps: int) -> int:
-    """Contact unknowns (one force per candidate and obstacle) of ``load.scene``, 0 without one."""
-    from .general import n_intervals  # general.py imports this module
-
-    if load.scene is None:
-        return 0
-    return n_candidates(n_intervals(robot, load), steps, load.scene.every) * load.scene.n_obstacles
-
-
 def interior_pieces(P: int, steps: int, g: int, every: int) -> np.ndarray:
-    """The pieces (of g steps, ``general.pieces``) whose starts are the interior candidates."""
+    """The pieces (of g steps, ``rod.pieces``) whose starts are the interior candidates."""
     nodes = every * np.arange(1, n_candidates(P, steps, every))
     return nodes // g
 

@@ -19,7 +19,8 @@ Header lines start with ``#`` and read ``key: value``; values with several numbe
 by commas (or spaces). The keys:
 
     tensions_N      required: the tension of each tendon [N], tendon 1 first, one per tendon.
-    insertion_mm    Nitinol tube insertion from the base [mm], 0 to the robot length; default 0.
+    insertion_mm    Nitinol tube insertion from the base [mm], 0 to the robot length; default 0
+                    (a robot without a tube: 0 or absent; the format holds one tube's depth).
     tip_mass_g      mass hanging at the tip [g], >= 0; default 0. Its weight is added by
                     ``Experiment.tip_load``, so do not count it in tip_force_N as well.
     tip_force_N     other tip force [N], world frame (x, y, z); default 0, 0, 0.
@@ -37,8 +38,9 @@ robot base frame, which is the world frame: base at the origin, robot axis along
 along -y. At least 2 points are needed.
 
 Units at the file edge are mm, g, N and N mm; an ``Experiment`` holds SI units (m, kg, N, N m).
-The reader checks the file against the robot (tendon count, insertion, arc length and point
-distance within the robot length plus 2% + 1 mm) and every error names the file and line
+An ``Experiment`` read from a file holds an ``Actuation`` (the tensions and the one tube's
+insertion) and ``Loads`` (tip force and moment). The reader checks the file against the robot
+(tendon count, insertion, arc length and point distance within the robot length plus 2% + 1 mm) and every error names the file and line
 (``path:line: ...``), the value and what is allowed.
 
 Several shapes: ``read_experiments`` reads files and folders into a list (the names stay there),
@@ -61,6 +63,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .checks import as_array, check_range, is_concrete
+from .description import Robot
 from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
 from .tree import pytree, set_fields, static, unchecked
 
@@ -98,30 +101,30 @@ class Experiment:
             >= 0 (a repeat is allowed only for padding points of weight 0, see ``stack``).
         position: measured positions [m], shape (n, 3), robot base frame = world frame (base at
             the origin, axis +z, gravity -y).
-        act: tendon tensions [N] and tube insertion [m]: an Actuation, or for a Robot a
-            Actuation (tensions, displacements, each tube's insertion; not in the shape-file
-            format yet).
-        load: tip force [N] and moment [N m], world frame, without the tip mass; none by default.
-            A TipLoad, or for a Robot also Loads (point loads along the body).
-        tip_mass: mass hanging at the tip [kg], >= 0.
+        act: tendon tensions [N], displacements and each tube's insertion [m] (an Actuation;
+            the shape-file format holds tensions and one tube's insertion).
+        load: the loads, world frame, without the tip mass (a Loads: tip force [N] and moment
+            [N m], point loads along the body; the shape-file format holds the tip's); none by
+            default.
+        tip_mass: mass hanging at the tip [kg], >= 0 (shape (...) of a stack; one number for all).
         weight: weight of each point, shape (n,), >= 0; None means all ones (0 marks padding).
         name: a label (static: experiments with different names do not share one compilation).
     """
 
     s: object
     position: object
-    act: Actuation | Actuation
+    act: Actuation
     load: Loads = dataclasses.field(default_factory=Loads)
     tip_mass: float = 0.0
     weight: object = None
     name: str = static(default="")
 
     def __post_init__(self):
-        if not isinstance(self.act, (Actuation, Actuation)):
-            raise TypeError(f"act must be a tdct.Actuation or tdct.Actuation, got {type(self.act).__name__}")
+        if not isinstance(self.act, Actuation):
+            raise TypeError(f"act must be a tdct.Actuation, got {type(self.act).__name__}")
         load = Loads() if self.load is None else self.load
-        if not isinstance(load, (TipLoad, Loads)):
-            raise TypeError(f"load must be a tdct.TipLoad or tdct.Loads, got {type(load).__name__}")
+        if not isinstance(load, Loads):
+            raise TypeError(f"load must be a tdct.Loads, got {type(load).__name__}")
         if not isinstance(self.name, str):
             raise TypeError(f"name must be a str, got {type(self.name).__name__}")
         s = as_array("s", self.s)
@@ -130,7 +133,9 @@ class Experiment:
             stacked = f" (a stack of {batch[0]}: {batch + ('n',)}, like its actuation)" if batch else ""
             raise ValueError(f"s must have shape (n,) with n >= 1, one arc length [m] per point{stacked}, got shape {s.shape}")
         shape = s.shape if is_concrete(s) else None
-        weight = self.weight
+        weight, tip_mass = self.weight, self.tip_mass
+        if shape is not None and len(shape) > 1 and is_concrete(tip_mass) and np.ndim(tip_mass) == 0:
+            tip_mass = np.full(shape[:-1], float(tip_mass))  # one tip mass for every experiment of a stack
         if weight is None:
             weight = np.ones(s.shape) if is_concrete(s) else jnp.ones_like(s)
         set_fields(
@@ -139,7 +144,7 @@ class Experiment:
             s=s,
             position=as_array("position", self.position, None if shape is None else shape + (3,)),
             weight=as_array("weight", weight, shape),
-            tip_mass=as_array("tip_mass", self.tip_mass, None if shape is None else shape[:-1]),
+            tip_mass=as_array("tip_mass", tip_mass, None if shape is None else shape[:-1]),
         )
         check_range("tip_mass", self.tip_mass, 0.0, unit=" kg")
         check_range("weight", self.weight, 0.0)
@@ -151,14 +156,12 @@ class Experiment:
     def n_points(self) -> int:
         return int(np.shape(self.s)[-1])
 
-    def tip_load(self, gravity=STANDARD_GRAVITY) -> TipLoad | Loads:
+    def tip_load(self, gravity=STANDARD_GRAVITY) -> Loads:
         """The whole load: ``load`` plus the weight of ``tip_mass`` under ``gravity`` [m/s^2]
-        (None: no weight) at the tip, of ``load``'s type. Works under jit and vmap, and on a stack."""
+        (None: no weight) at the tip. Works under jit and vmap, and on a stack."""
         weight = jnp.einsum("...,i->...i", jnp.asarray(self.tip_mass), gravity_vector(gravity))
-        if isinstance(self.load, Loads):
-            rest = {f.name: getattr(self.load, f.name) for f in dataclasses.fields(Loads) if f.name != "tip_force"}
-            return unchecked(Loads, tip_force=jnp.asarray(self.load.tip_force) + weight, **rest)
-        return TipLoad(force=jnp.asarray(self.load.force) + weight, moment=self.load.moment)
+        rest = {f.name: getattr(self.load, f.name) for f in dataclasses.fields(Loads) if f.name != "tip_force"}
+        return unchecked(Loads, tip_force=jnp.asarray(self.load.tip_force) + weight, **rest)
 
 
 def _check_increasing(s: np.ndarray, weight: np.ndarray) -> None:
@@ -183,14 +186,15 @@ def read_experiment(path: str | os.PathLike, robot: Robot | None = None) -> Expe
     Args:
         path: the shape file.
         robot: the robot that was measured, to check tendon count, insertion and lengths;
-            default ``Robot()``.
+            default ``Robot.paper()``. Its tube count sets the actuation's insertions: one tube's
+            depth ``insertion_mm``; none for a robot without a tube (``insertion_mm`` 0).
 
     Raises:
         ValueError: the file cannot be read or breaks the format; the message starts with
             ``path:line:`` (or ``path:`` for the whole file) and names value and allowed range.
     """
     path = Path(path)
-    robot = Robot() if robot is None else robot
+    robot = Robot.paper() if robot is None else robot
     if not isinstance(robot, Robot):
         raise TypeError(f"robot must be a tdct.Robot, got {type(robot).__name__}")
     length_mm = 1000 * float(robot.length)
@@ -213,8 +217,8 @@ def read_experiment(path: str | os.PathLike, robot: Robot | None = None) -> Expe
     return Experiment(
         s=s_mm / 1000,
         position=xyz_mm / 1000,
-        act=Actuation(values["tensions_N"], values["insertion_mm"][0] / 1000),
-        load=TipLoad(values["tip_force_N"], values["tip_moment_Nmm"] / 1000),
+        act=Actuation(values["tensions_N"], values["insertion_mm"][: robot.n_tubes] / 1000),
+        load=Loads(tip_force=values["tip_force_N"], tip_moment=values["tip_moment_Nmm"] / 1000),
         tip_mass=values["tip_mass_g"][0] / 1000,
         name=values["name"] or path.stem,
     )
@@ -358,12 +362,14 @@ def _check_extent(path: Path, lines: list, values: np.ndarray, length: float, wh
 
 def _header_values(path: Path, header: dict, robot: Robot, length_mm: float) -> dict:
     """The header values as float arrays (name as text), checked against the robot, defaults filled in."""
-    n = robot.n_tendons
+    n, tubes = robot.n_tendons, robot.n_tubes
+    if tubes > 1:
+        raise _error(path, 0, f"the robot has {tubes} tubes: a shape file holds one tube's insertion (insertion_mm)")
     if "tensions_N" not in header:
         raise _error(path, 0, f"missing header line '# tensions_N: ...' with one tension [N] per tendon ({n} for this robot)")
     specs = {  # key: (number of values, default, lower bound, upper bound, unit)
         "tensions_N": (n, None, 0.0, math.inf, " N"),
-        "insertion_mm": (1, 0.0, 0.0, length_mm, " mm (0 to the robot length)"),
+        "insertion_mm": (1, 0.0, 0.0, length_mm, " mm (0 to the robot length)") if tubes else (1, 0.0, 0.0, 0.0, " mm (no tube)"),
         "tip_mass_g": (1, 0.0, 0.0, math.inf, " g"),
         "tip_force_N": (3, 0.0, -math.inf, math.inf, " N"),
         "tip_moment_Nmm": (3, 0.0, -math.inf, math.inf, " N mm"),
@@ -394,12 +400,25 @@ def write_experiment(path: str | os.PathLike, exp: Experiment) -> Path:
     Raises:
         ValueError: a stacked experiment, weights other than 1 (the file has no weight column),
             or a name with line breaks or surrounding spaces.
-        TypeError: a Actuation or Loads (the format holds an Actuation and a TipLoad).
+        ValueError: what the format does not hold: displacement-driven tendons, more than one
+            tube, point or distributed loads, a scene.
     """
-    if not isinstance(exp.act, Actuation) or not isinstance(exp.load, TipLoad):
-        raise TypeError(
-            f"the shape file holds a tdct.Actuation and a tdct.TipLoad, got {type(exp.act).__name__} and "
-            f"{type(exp.load).__name__}: a general robot's experiments are not in the file format yet"
+    act, load = exp.act, exp.load
+    beyond = [
+        what
+        for what, there in (
+            (f"displacement-driven tendons (driven = {act.driven})", act.driven),
+            (f"{np.shape(act.insertions)[-1]} tube insertions", np.shape(act.insertions)[-1] > 1),
+            (f"{np.size(load.point_s)} point load(s)", np.size(load.point_s)),
+            ("a distributed force", np.any(np.asarray(load.distributed_force) != 0)),
+            ("a scene", load.scene is not None),
+        )
+        if there
+    ]
+    if beyond:
+        raise ValueError(
+            "the shape file holds the tensions, one tube's insertion and the tip's force and moment; "
+            f"this experiment has {', '.join(beyond)} besides"
         )
     path = Path(path)
     s = np.asarray(exp.s, dtype=float)
@@ -412,10 +431,10 @@ def write_experiment(path: str | os.PathLike, exp: Experiment) -> Path:
     header = {
         "name": exp.name,
         "tensions_N": exp.act.tensions,
-        "insertion_mm": 1000 * np.asarray(exp.act.insertion),
+        "insertion_mm": 1000 * np.asarray(act.insertion) if np.size(act.insertions) else 0.0,
         "tip_mass_g": 1000 * np.asarray(exp.tip_mass),
-        "tip_force_N": exp.load.force,
-        "tip_moment_Nmm": 1000 * np.asarray(exp.load.moment),
+        "tip_force_N": load.tip_force,
+        "tip_moment_Nmm": 1000 * np.asarray(load.tip_moment),
     }
     lines = [f"# tdct_jax shape v{VERSION}"]
     lines += [f"# {key}: {value if key == 'name' else _numbers(value, ', ')}" for key, value in header.items()]
@@ -440,13 +459,12 @@ def stack(experiments: Sequence[Experiment]) -> Experiment:
     Shapes with fewer points are padded to the longest by repeating their last point with
     weight 0. The stack's ``name`` is "": the names stay with the caller's list, in order.
 
-    Experiments with a Actuation stack into one (all of them, with the same ``driven``);
-    loads stack as TipLoads, or as Loads (TipLoads among them converted) with the same number of
-    point loads.
+    Actuations stack when they have the same ``driven`` and tube count, loads when they have the
+    same number of point loads (a scene is not stacked).
 
     Raises:
-        ValueError: no experiments, a stacked one among them, different numbers of tendons, or
-            actuations or point loads that do not stack.
+        ValueError: no experiments, a stacked one among them, different numbers of tendons or
+            tubes, different ``driven``, or different numbers of point loads.
     """
     experiments = list(experiments)
     if not experiments:
@@ -459,19 +477,18 @@ def stack(experiments: Sequence[Experiment]) -> Experiment:
     if len(set(tendons)) > 1:
         counts = ", ".join(f"{label} has {t}" for label, t in zip(labels, tendons, strict=True))
         raise ValueError(f"cannot stack experiments with different numbers of tendons: {counts}")
-    general = [isinstance(e.act, Actuation) for e in experiments]
-    if any(general) and (not all(general) or len({e.act.driven for e in experiments}) > 1):
-        kinds = ", ".join(f"{label} has {_actuation_kind(e.act)}" for label, e in zip(labels, experiments, strict=True))
-        raise ValueError(
-            f"cannot stack these actuations: all must be Actuations, or GeneralActuations with the same driven; {kinds}"
-        )
+    tubes = [np.shape(e.act.insertions)[-1] for e in experiments]
+    if len(set(tubes)) > 1:
+        counts = ", ".join(f"{label} has {t}" for label, t in zip(labels, tubes, strict=True))
+        raise ValueError(f"cannot stack experiments with different numbers of tube insertions: {counts}")
+    if len({e.act.driven for e in experiments}) > 1:
+        kinds = ", ".join(f"{label} has driven = {e.act.driven}" for label, e in zip(labels, experiments, strict=True))
+        raise ValueError(f"cannot stack these actuations: all must have the same driven tendons; {kinds}")
     loads = [e.load for e in experiments]
-    if not all(isinstance(load, TipLoad) for load in loads):
-        loads = [Loads.of(load) for load in loads]
-        counts = [load.n_points for load in loads]
-        if len(set(counts)) > 1:
-            listed = ", ".join(f"{label} has {c}" for label, c in zip(labels, counts, strict=True))
-            raise ValueError(f"cannot stack experiments with different numbers of point loads: {listed}")
+    counts = [load.n_points for load in loads]
+    if len(set(counts)) > 1:
+        listed = ", ".join(f"{label} has {c}" for label, c in zip(labels, counts, strict=True))
+        raise ValueError(f"cannot stack experiments with different numbers of point loads: {listed}")
     n = max(e.n_points for e in experiments)
 
     def pad(x, fill=None):
@@ -486,23 +503,12 @@ def stack(experiments: Sequence[Experiment]) -> Experiment:
         names = [f.name for f in dataclasses.fields(cls) if not f.metadata.get("static") and f.name != "scene"]
         return {k: np.stack([np.asarray(getattr(x, k), dtype=float) for x in items]) for k in names}
 
-    if all(general):
-        act = unchecked(
-            Actuation, driven=experiments[0].act.driven, **leaves([e.act for e in experiments], Actuation)
-        )
-    else:
-        act = Actuation(stacked(lambda e: e.act.tensions), stacked(lambda e: e.act.insertion))
-    load_cls = type(loads[0])
     return Experiment(
         s=stacked(lambda e: pad(e.s)),
         position=stacked(lambda e: pad(e.position)),
-        act=act,
-        load=load_cls(**leaves(loads, load_cls)) if load_cls is TipLoad else unchecked(Loads, **leaves(loads, Loads)),
+        act=unchecked(Actuation, driven=experiments[0].act.driven, **leaves([e.act for e in experiments], Actuation)),
+        load=unchecked(Loads, scene=None, **leaves(loads, Loads)),
         tip_mass=stacked(lambda e: e.tip_mass),
         weight=stacked(lambda e: pad(e.weight, fill=0.0)),
         name="",
     )
-
-
-def _actuation_kind(act) -> str:
-    return f"Actuation(driven={act.driven})" if isinstance(act, Actuation) else type(act).__name__

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from pathlib import Path
 from typing import ClassVar
 
@@ -18,7 +19,19 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import fields
-from .checks import UnitWarning, as_array, check_range, deprecated, fmt, interval, is_concrete, read_toml, warn_user
+from .checks import (
+    UnitWarning,
+    array_module,
+    as_array,
+    check_range,
+    deprecated,
+    fmt,
+    interval,
+    is_concrete,
+    plausibility_note,
+    read_toml,
+    warn_user,
+)
 from .tree import pytree, set_fields, static
 
 NU_RANGE = (-1.0, 0.5)
@@ -113,10 +126,11 @@ class Tendon:
     def position(self, s):
         """r_t(s) and its derivative r_t'(s), body frame [m] and [1], each (..., 3)."""
         twist = 0.0 if self.twist is None else self.twist
+        xp = array_module(self.offset, self.angle, twist, s)  # numpy for concrete values: no JAX backend started
         a = self.angle + twist * s
-        c, sn = jnp.cos(a), jnp.sin(a)
-        r = self.offset * jnp.stack([c, sn, jnp.zeros_like(c)], axis=-1)
-        dr = (self.offset * twist) * jnp.stack([-sn, c, jnp.zeros_like(c)], axis=-1)
+        c, sn = xp.cos(a), xp.sin(a)
+        r = self.offset * xp.stack([c, sn, xp.zeros_like(c)], axis=-1)
+        dr = (self.offset * twist) * xp.stack([-sn, c, xp.zeros_like(c)], axis=-1)
         return r, dr
 
 
@@ -308,17 +322,34 @@ class Robot(metaclass=_PaperByDefault):
 
     @classmethod
     def from_table(cls, data: dict, path) -> Robot:
-        """``from_dict`` of a robot file's table, its errors prefixed with the file's path."""
-        try:
-            return cls.from_dict(data)
-        except (ValueError, TypeError) as e:
-            raise ValueError(f"robot file {path}: {e}") from e
+        """``from_dict`` of a robot file's table, its errors and unit notes prefixed with the file's path."""
+        with warnings.catch_warnings(record=True) as notes:
+            warnings.simplefilter("always", UnitWarning)
+            try:
+                robot = cls.from_dict(data)
+            except (ValueError, TypeError) as e:
+                raise ValueError(f"robot file {path}: {e}") from e
+        for note in notes:
+            if issubclass(note.category, UnitWarning):
+                warn_user(f"robot file {path}: {note.message}", UnitWarning)
+            else:
+                warnings.warn_explicit(note.message, note.category, note.filename, note.lineno)
+        return robot
 
     @classmethod
     def from_dict(cls, data: dict) -> Robot:
         """A robot from the parsed robot file (the TOML's tables as dicts); see ``from_toml``."""
+        if "sections" not in data:  # the paper robot's values by their Table II names (``Robot.paper``)
+            table = data.get("robot", data)
+            unknown = sorted(set(table) - set(PAPER))
+            if unknown:
+                raise ValueError(
+                    f"unknown field(s) {unknown}; allowed: the robot file's keys (length, sections, ...) or {sorted(PAPER)}"
+                )
+            return cls.paper(**table)
         # a [rig] table (how the robot sits on its test rig) is read by ``rig.Rig.from_toml``
-        _keys("the file", data, required=("length", "sections"), optional=("tendons", "tubes", "masses", "rig"))
+        ranges = ("calibrated_tension", "calibrated_tip_force")
+        _keys("the file", data, required=("length", "sections"), optional=("tendons", "tubes", "masses", "rig", *ranges))
         length = data["length"]
         sections, previous = [], 0.0
         for i, raw in enumerate(_tables("sections", data)):
@@ -352,12 +383,14 @@ class Robot(metaclass=_PaperByDefault):
         for i, raw in enumerate(_tables("masses", data)):
             _keys(f"masses[{i}]", raw, required=("s", "mass"))
             masses.append(_build(PointMass, f"masses[{i}]", raw))
-        return cls(length, tuple(sections), tuple(tendons), tuple(tubes), tuple(masses))
+        calibrated = {k: data[k] for k in ranges if k in data}
+        return cls(length, tuple(sections), tuple(tendons), tuple(tubes), tuple(masses), **calibrated)
 
     def to_toml(self) -> str:
         """The robot as a robot file's text (``from_toml`` reads it back, angles to the round-off of
         their conversion to degrees)."""
         lines = [f"length = {float(self.length)!r}"]
+        lines += [f"{k} = {list(getattr(self, k))!r}" for k in ("calibrated_tension", "calibrated_tip_force") if getattr(self, k)]
         for kind, table in (
             ("sections", self.sections),
             ("tendons", self.tendons),
@@ -415,9 +448,11 @@ class Robot(metaclass=_PaperByDefault):
 
     def replace(self, values=None, /, **named) -> Robot:
         """This robot with fields changed by name (fields.py): ``{"sections[0].E": 1e6}``,
-        ``{"tendons[*].offset": 7e-3}`` or keywords for top-level names (``length=0.2``). Values
-        may be traced (``jax.grad`` through them); concrete ones are checked as when built."""
-        return fields.replace(self, {**(values or {}), **named})
+        ``{"tendons[*].offset": 7e-3}``, or keywords: ``length=0.2``, or whole item tuples
+        (``masses=(tdct.PointMass(0.1, 0.01),)``). Values may be traced (``jax.grad`` through
+        them); concrete ones are checked as when built."""
+        items = {k: named.pop(k) for k in list(named) if k in self.ITEMS}
+        return fields.replace(dataclasses.replace(self, **items) if items else self, {**(values or {}), **named})
 
     @classmethod
     def paper(cls, **table_ii) -> Robot:
@@ -442,6 +477,7 @@ class Robot(metaclass=_PaperByDefault):
         if unknown:
             raise TypeError(f"Robot.paper: unknown value(s) {unknown}; allowed: {sorted(PAPER)}")
         v = PAPER | table_ii
+        _check_paper(v)
         section = Section(
             end=v["length"],
             outer_diameter=v["outer_diameter"],
@@ -543,6 +579,49 @@ def _build(cls, where: str, kw: dict):
         return cls(**kw)
     except ValueError as e:
         raise ValueError(str(e).replace(f"{cls.__name__}.", f"{where}.", 1)) from e
+
+
+def _check_paper(v: dict) -> None:
+    """``Robot.paper``'s values checked by their Table II names (then its items check themselves)."""
+    units = dict(E_silicone=" Pa", E_tube=" Pa", density_silicone=" kg/m^3", density_tube=" kg/m^3", nu_silicone="", nu_tube="")
+    for name in PAPER:
+        if name not in ("tendon_angles", "calibrated_tension", "calibrated_tip_force"):
+            v[name] = as_array(name, v[name], (), unit=units.get(name, " m"))
+    for name in ("length", "outer_diameter", "E_silicone", "E_tube", "tube_outer_diameter"):
+        check_range(name, v[name], 0.0, lo_open=True, unit=units.get(name, " m"))
+    for name in ("density_silicone", "density_tube", "tendon_channel_diameter", "tube_inner_diameter"):
+        check_range(name, v[name], 0.0, unit=units.get(name, " m"))
+    for name in ("nu_silicone", "nu_tube"):
+        check_range(name, v[name], *NU_RANGE, lo_open=True)
+    for name in PAPER:
+        note = plausibility_note(name, v[name])
+        if note:
+            warn_user(note, UnitWarning)
+    if not all(is_concrete(v[n]) for n in ("outer_diameter", "channel_diameter", "tube_outer_diameter", "tendon_offset")):
+        return
+    check_range("channel_diameter", v["channel_diameter"], 0.0, float(v["outer_diameter"]), hi_open=True, unit=" m")
+    where = " m (must fit the channel)"
+    check_range("tube_outer_diameter", v["tube_outer_diameter"], 0.0, float(v["channel_diameter"]), lo_open=True, unit=where)
+    dt = float(v["tendon_channel_diameter"])
+    rim = (float(v["outer_diameter"]) - dt) / 2
+    if dt > 0:
+        core = (float(v["channel_diameter"]) + dt) / 2
+        where = " m (tendon channels between the central channel and the surface)"
+        check_range("tendon_offset", v["tendon_offset"], core, rim, unit=where)
+    else:
+        check_range("tendon_offset", v["tendon_offset"], 0.0, rim, unit=" m (tendons inside the body)")
+    a = np.asarray(v["tendon_angles"], dtype=float) if is_concrete(v["tendon_angles"]) else None
+    if dt > 0 and a is not None and a.size > 1:  # the channels at r_t do not overlap
+        gap = np.abs((a[:, None] - a[None, :] + np.pi) % (2 * np.pi) - np.pi)
+        np.fill_diagonal(gap, np.inf)
+        i, j = np.unravel_index(np.argmin(gap), gap.shape)
+        distance = 2 * float(v["tendon_offset"]) * np.sin(gap[i, j] / 2)
+        if distance <= dt:
+            raise ValueError(
+                f"tendon_angles: tendons {min(i, j) + 1} and {max(i, j) + 1} are {np.degrees(gap[i, j]):.3g} deg apart, so their "
+                f"channels (diameter {dt:g} m) at tendon_offset {float(v['tendon_offset']):g} m overlap: centres {distance:.3g} m "
+                f"apart, at least {dt:g} m needed"
+            )
 
 
 PAPER = dict(

@@ -5,7 +5,7 @@ The force F (world frame, 3 components) acts at an unknown arc length s_F; actua
 load are known. Both are found by Levenberg-Marquardt (``lm.py``) on the measurement residuals
 divided by the measurement noise, with the Jacobian in (s_F, F) exact: forward-mode autodiff
 through the implicitly differentiated solve, s_F being a breakpoint of the integration plan
-(``general.py``). The start is the best of a grid of locations, each with the force that the
+(``rod.py``). The start is the best of a grid of locations, each with the force that the
 shape's linearisation about the unloaded robot gives there; the uncertainty is the Gauss-Newton
 covariance at the answer.
 """
@@ -23,11 +23,11 @@ from . import status
 from .checks import as_array, check_integer, check_range
 from .data import Experiment
 from .description import Robot
-from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
+from .inputs import STANDARD_GRAVITY, gravity_vector
 from .lm import covariance, levenberg_marquardt
 from .mechanics import positions_at
 from .options import DEFAULT_SOLVER, SolverOptions
-from .solve import solve, with_scene
+from .solve import problem, solve
 from .tree import pytree, set_fields
 
 
@@ -117,7 +117,7 @@ def _evaluate(x, robot, act, load, gravity, solver, measured, noise, axial):
 
 
 def estimate_force(
-    robot: Robot | Robot,
+    robot: Robot,
     measured: Experiment | TipPose,
     *,
     act=None,
@@ -135,11 +135,11 @@ def estimate_force(
     """Estimates one unknown point force (location and vector) on the body from a measurement.
 
     Args:
-        robot: the robot (a Robot is solved as ``robot.to_general()``).
+        robot: the robot.
         measured: a measured shape (an ``Experiment``: points at arc lengths along the body, with
             its actuation and known load) or a ``TipPose`` (then ``act`` and ``load`` are needed).
-        act: the known actuation for a ``TipPose`` (an Actuation or Actuation).
-        load: the known load for a ``TipPose`` (TipLoad, Loads or None).
+        act: the known actuation for a ``TipPose`` (an Actuation).
+        load: the known load for a ``TipPose`` (Loads or None).
         noise: the standard deviation of each measured coordinate [m], > 0.
         angle_noise: that of each component of the tip's rotation [rad], > 0 (``TipPose`` only).
         axial_noise: None (default): the force's three components are free. A value [N]: the
@@ -165,7 +165,6 @@ def estimate_force(
     if axial_noise is not None:
         check_range("axial_noise", axial_noise, 0.0, lo_open=True, unit=" N")
     grid, max_steps = check_integer("grid", grid), check_integer("max_steps", max_steps)
-    general = robot if isinstance(robot, Robot) else robot.to_general()
     if isinstance(measured, Experiment):
         act, load = measured.act, measured.tip_load(gravity)
         n_data = 3 * int(np.count_nonzero(measured.weight))
@@ -175,12 +174,10 @@ def estimate_force(
         n_data = 6
     else:
         raise ValueError(f"measured must be a tdct.Experiment (a shape) or a TipPose, got {type(measured).__name__}")
-    act, load = Actuation.of(act, general.n_tubes), Loads.of(load)
-    if scene is not None:
-        general, act, load = with_scene(general, act, load, scene, solver)
-    L = float(general.length)
+    robot, act, load = problem(robot, act, load, solver, scene)
+    L = float(robot.length)
     args = (
-        general,
+        robot,
         act,
         load,
         gravity_vector(gravity),
@@ -224,7 +221,7 @@ def estimate_force(
 
 
 def synthesize(
-    robot: Robot | Robot,
+    robot: Robot,
     act,
     s: float,
     magnitude: float,
@@ -249,15 +246,14 @@ def synthesize(
     Returns:
         The Experiment (with ``act`` and ``load``) and the force [N] (3,), world frame.
     """
-    general = robot if isinstance(robot, Robot) else robot.to_general()
-    act, load = Actuation.of(act, general.n_tubes), Loads.of(load)
-    L = float(general.length)
+    robot, act, load = problem(robot, act, load, solver)
+    L = float(robot.length)
     F = np.zeros(3)
     for _ in range(sweeps):
-        sol = solve(general, act, load.with_point(jnp.asarray(s, float), jnp.asarray(F)), gravity=gravity, solver=solver)
+        sol = solve(robot, act, load.with_point(jnp.asarray(s, float), jnp.asarray(F)), gravity=gravity, solver=solver)
         R = np.asarray(sol.rotation[np.argmin(np.abs(np.asarray(sol.s) - s))])
         F = magnitude * (R @ np.array([np.cos(angle), np.sin(angle), 0.0]))
-    sol = solve(general, act, load.with_point(jnp.asarray(s, float), jnp.asarray(F)), gravity=gravity, solver=solver)
+    sol = solve(robot, act, load.with_point(jnp.asarray(s, float), jnp.asarray(F)), gravity=gravity, solver=solver)
     s_m = L * np.arange(1, points + 1) / points
     p = np.asarray(positions_at(sol, s_m))
     if rng is not None:

@@ -60,12 +60,9 @@ class Actuation(metaclass=_Insertion):
             tensions = (tensions,)
         tensions = as_array("tensions", tensions, trailing=(np.shape(tensions)[-1],) if is_concrete(tensions) else None)
         check_range("tensions", tensions, 0.0, unit=" N")
-        insertions = self.insertions
+        insertions = as_array("insertions", self.insertions, unit=" m")
         if np.ndim(insertions) == 0 or np.ndim(insertions) == np.ndim(tensions) - 1 > 0:
-            insertions = (np if is_concrete(insertions) else jnp).asarray(insertions, dtype=float)[..., None]  # one tube
-        insertions = as_array(
-            "insertions", insertions, trailing=(np.shape(insertions)[-1],) if is_concrete(insertions) else None, unit=" m"
-        )
+            insertions = insertions[..., None]  # one tube
         check_range("insertions", insertions, 0.0, unit=" m")
         if is_concrete(tensions) and is_concrete(insertions) and np.size(tensions) and np.size(insertions):
             ta, ia = np.shape(tensions)[:-1], np.shape(insertions)[:-1]
@@ -78,7 +75,11 @@ class Actuation(metaclass=_Insertion):
         if len(set(driven)) != len(driven) or any(i < 0 for i in driven):
             raise ValueError(f"driven = {self.driven!r}: distinct tendon indices (0 for tendon 1) expected")
         k = len(driven)
-        displacements = as_array("displacements", self.displacements, (k,) if is_concrete(self.displacements) else None, unit=" m")
+        displacements = as_array(
+            "displacements", self.displacements, (k,) if is_concrete(self.displacements) else None, unit=" m"
+        )
+        if not k and np.ndim(tensions) > 1:  # none, with the tensions' batch axes: vmap maps every leaf
+            displacements = np.zeros(np.shape(tensions)[:-1] + (0,))
         set_fields(self, tensions=tensions, insertions=insertions, displacements=displacements, driven=driven)
 
     @property
@@ -228,7 +229,7 @@ class TipLoad:
 
     @staticmethod
     def from_mass(mass, gravity=STANDARD_GRAVITY) -> Loads:
-        deprecated("tdct.Loads.from_mass", "tdct.Loads.from_mass")
+        deprecated("tdct.TipLoad.from_mass", "tdct.Loads.from_mass")
         return Loads.from_mass(mass, gravity)
 
 

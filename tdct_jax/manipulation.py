@@ -20,6 +20,7 @@ from jax import lax
 from . import status
 from .batch import Kernel, batch_options
 from .checks import check_integer, is_concrete
+from .description import Robot
 from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
 from .results import CapacityResult, OptimumResult
@@ -51,11 +52,20 @@ class Capacity(NamedTuple):
 
 
 def _tip_height(robot, act, load, mass, depth, gravity, solver, guess=None):
-    """Tip height y(L) [m] and the solution, with ``mass`` [kg] hung at the tip and the tube ``depth`` [m] deeper."""
-    act = Actuation(act.tensions, act.insertion + depth)
-    load = TipLoad(load.force + mass * gravity, load.moment)
+    """Tip height y(L) [m] and the solution, with ``mass`` [kg] hung at the tip and the first tube
+    ``depth`` [m] deeper (None: the insertions as they are, for a robot with or without tubes)."""
+    if depth is not None:
+        insertions = jnp.asarray(act.insertions).at[..., 0].add(depth)
+        act = Actuation._rebuild(act.tensions, insertions, act.displacements, act.driven)
+    load = load._with(tip_force=load.tip_force + mass * gravity)
     sol = solve(robot, act, load, gravity=gravity, solver=solver, guess=guess, throw=False)
     return sol.tip_position[1], sol
+
+
+def _first_tube(robot, what: str) -> None:
+    """Refuses a robot without a tube where the first tube's insertion is what is sought."""
+    if robot.n_tubes < 1:
+        raise ValueError(f"{what}: the robot has no tube; the insertion optimised is its first tube's")
 
 
 def _height_and_slope(height_at, x):
@@ -100,7 +110,7 @@ def capacity(
     Returns:
         Capacity (mass [kg], reachable, iterations, result).
     """
-    check_inputs(robot, act, Loads(), solver)
+    robot, act, _ = problem(robot, act, Loads(), solver)
     max_steps = check_integer("max_steps", max_steps)
     cap = _capacity(robot, act, height, height_tol, gravity_vector(gravity), solver, max_steps)
     status.check(cap.result, throw=throw, what="the load capacity", max_steps=max_steps, unreachable=_unreachable(height))
@@ -114,11 +124,11 @@ def _capacity(robot, act, height, height_tol, gravity, solver, max_steps) -> Cap
     load = Loads()
 
     def f(m):
-        return _tip_height(robot, act, load, m, 0.0, gravity, solver)[0] - height
+        return _tip_height(robot, act, load, m, None, gravity, solver)[0] - height
 
     def search(_, m0):
         def probe(m, guess):
-            y, dy, ok, sol = _height_and_slope(lambda m: _tip_height(robot, act, load, m, 0.0, gravity, solver, guess), m)
+            y, dy, ok, sol = _height_and_slope(lambda m: _tip_height(robot, act, load, m, None, gravity, solver, guess), m)
             return y - height, dy, ok, jnp.where(ok, sol.base_wrench, guess), _failed_solve(sol)
 
         def not_done(c):
@@ -174,7 +184,7 @@ class Optimum(NamedTuple):
 def insertion_optimum(
     robot: Robot,
     act: Actuation,
-    load: TipLoad,
+    load: Loads,
     lo,
     hi,
     *,
@@ -191,8 +201,11 @@ def insertion_optimum(
     optimum at d = 0 or d = L) it evaluates that end. ``slope_tol`` is its own tolerance on
     |dy/dd|, ``max_steps`` its own limit; ``solver`` and ``throw`` as for ``capacity``.
     """
+    _first_tube(robot, "insertion_optimum")
     gravity = gravity_vector(gravity)
-    act = Actuation(act.tensions, jnp.zeros(()))
+    act = Actuation.of(act, robot)
+    insertions = jnp.asarray(act.insertions).at[..., 0].set(0.0)  # the first tube's depth is sought
+    act = Actuation._rebuild(act.tensions, insertions, act.displacements, act.driven)
 
     def probe(d):
         y, dy, ok, sol = _height_and_slope(lambda d: _tip_height(robot, act, load, 0.0, d, gravity, solver), d)
@@ -235,11 +248,11 @@ def _optimum_point(base, point, kernel: Kernel):
     return insertion_optimum(robot, act, load, point["lo"], point["hi"], **options)._asdict()
 
 
-def _grid_options(f, options: dict) -> tuple[dict, dict, tuple]:
+def _grid_options(f, options: dict, solver: SolverOptions) -> tuple[dict, dict, tuple]:
     """Splits a grid entry point's keyword options into the batching options (as for
     ``tdct.sweep``), gravity and solver (shared by every point), and f's own (static, per point)."""
     batching = {k: options.pop(k) for k in ("chunk_size", "progress", "devices") if k in options}
-    shared = {k: options.pop(k, inspect.signature(f).parameters[k].default) for k in ("gravity", "solver")}
+    shared = {"gravity": options.pop("gravity", inspect.signature(f).parameters["gravity"].default), "solver": solver}
     allowed = {k for k, p in inspect.signature(f).parameters.items() if p.kind is p.KEYWORD_ONLY} - {"throw"}
     unknown = sorted(set(options) - allowed)
     if unknown:
@@ -249,21 +262,24 @@ def _grid_options(f, options: dict) -> tuple[dict, dict, tuple]:
     return batching, shared, tuple(sorted(options.items()))
 
 
-def load_capacity(robot=None, act=None, *, grid=None, batch=None, throw=True, **options) -> CapacityResult:
+def load_capacity(
+    robot=None, act=None, *, grid=None, batch=None, solver: SolverOptions = DEFAULT_SOLVER, throw=True, **options
+) -> CapacityResult:
     """``capacity`` at one configuration or over a ``grid`` / ``batch`` of inputs (see ``tdct.sweep``).
 
     Args:
         robot, act, grid, batch: as for ``tdct.sweep`` (the tip mass is what is sought).
+        solver: SolverOptions for every solve.
         throw: raise ConvergenceError after the whole grid, naming the first failed or
             unreachable point (default, as everywhere); with False they stay in ``result`` per
             point (UNREACHABLE where the tip cannot reach the height: mass 0).
-        **options: ``capacity``'s keyword arguments (height, height_tol, max_steps, gravity,
-            solver) and the batching options of ``tdct.sweep`` (chunk_size, progress, devices).
+        **options: ``capacity``'s other keyword arguments (height, height_tol, max_steps,
+            gravity) and the batching options of ``tdct.sweep`` (chunk_size, progress, devices).
 
     Returns:
         CapacityResult with mass [kg], reachable, iterations and result per point.
     """
-    batching, shared, own = _grid_options(capacity, options)
+    batching, shared, own = _grid_options(capacity, options, solver)
     base, points, shape, axes = prepare(robot, act, None, grid, batch, **shared, single=True)
     run = batch_options(**batching)
     start = perf_counter()
@@ -276,8 +292,11 @@ def load_capacity(robot=None, act=None, *, grid=None, batch=None, throw=True, **
     return CapacityResult(shape=shape, axes=axes, inputs=unflatten(points, shape), seconds=perf_counter() - start, **out)
 
 
-def optimal_insertion(robot=None, act=None, load=None, *, grid=None, n_curve=33, throw=True, **options) -> OptimumResult:
-    """Insertion depth that maximises the tip height y_tip (Fig. 13), with the curve y_tip(d).
+def optimal_insertion(
+    robot=None, act=None, load=None, *, grid=None, n_curve=33, solver: SolverOptions = DEFAULT_SOLVER, throw=True, **options
+) -> OptimumResult:
+    """Insertion depth of the first tube that maximises the tip height y_tip (Fig. 13), with the
+    curve y_tip(d); any other tubes stay where ``act`` puts them.
 
     First the curve on ``n_curve`` depths from 0 to L (one sweep); its highest point brackets
     the optimum, which ``insertion_optimum`` refines to a zero of the exact slope.
@@ -286,24 +305,31 @@ def optimal_insertion(robot=None, act=None, load=None, *, grid=None, n_curve=33,
         robot, act, load: as for ``tdct.sweep``.
         grid: (optional) varies the other inputs, e.g. {"tip_mass": ..., "tensions": ...}.
         n_curve: depths on the curve, >= 3.
+        solver: SolverOptions for every solve.
         throw: as for ``load_capacity``.
-        **options: ``insertion_optimum``'s keyword arguments (slope_tol, max_steps, gravity,
-            solver) and the batching options of ``tdct.sweep`` (chunk_size, progress, devices).
+        **options: ``insertion_optimum``'s other keyword arguments (slope_tol, max_steps,
+            gravity) and the batching options of ``tdct.sweep`` (chunk_size, progress, devices).
 
     Returns:
         OptimumResult with insertion [m], height [m], slope, iterations, result, interior,
         curve_insertion (n_curve,) [m] and curve_height (shape + (n_curve,)) [m].
     """
-    if grid is not None and "insertion" in grid:
+    if grid is not None and ("insertion" in grid or "insertions" in grid):
         raise ValueError("optimal_insertion: the insertion is what is optimised; do not put it in grid")
     check_integer("n_curve", n_curve, 3)
-    batching, shared, own = _grid_options(insertion_optimum, options)
+    batching, shared, own = _grid_options(insertion_optimum, options, solver)
     base, points, shape, axes = prepare(robot, act, load, grid, None, **shared, single=True)
     robot, act, load = base[:3]
+    _first_tube(robot, "optimal_insertion")
     run = batch_options(**batching)
     start = perf_counter()
     depths = np.linspace(0.0, float(robot.length), n_curve)
-    grid = {**(grid or {}), "insertion": depths}
+    if robot.n_tubes == 1:
+        grid = {**(grid or {}), "insertion": depths}
+    else:  # the first tube moves, the others stay
+        curve_insertions = np.repeat(np.asarray(act.insertions, dtype=float)[None], n_curve, axis=0)
+        curve_insertions[:, 0] = depths
+        grid = {**(grid or {}), "insertions": curve_insertions}
     curve = sweep(robot, act, load, grid=grid, **shared, throw=False, **batching)
     heights = curve.tip_position[..., 1].reshape(-1, n_curve)
     k = np.argmax(heights, axis=1)

@@ -22,13 +22,13 @@ from .description import Robot
 from .inputs import STANDARD_GRAVITY, Actuation, Loads
 from .options import DEFAULT_SOLVER, SolverOptions
 from .so3 import rotation_columns
-from .solve import Solution, check_solution, solution_and_compliance, solve, solve_arguments
+from .solve import check_solution, solution_and_compliance, solve, solve_arguments
 
 
 def compliance(
-    robot: Robot | Robot,
-    act: Actuation | Actuation | None,
-    load: TipLoad | Loads | None = None,
+    robot: Robot,
+    act: Actuation | None,
+    load: Loads | None = None,
     *,
     at=None,
     full: bool = False,
@@ -50,9 +50,7 @@ def compliance(
     Args:
         robot, act, load, gravity, solver, guess: as for ``tdct.solve``; the compliance is taken
             about these loads.
-        at: arc length s [m] in [0, L]; None: the tip. A paper ``Robot`` is solved for it through
-            ``robot.to_general()`` (the same solution to 1e-12), so ``solver`` must use the
-            'balanced' transition and the 'exact' tendon model there.
+        at: arc length s [m] in [0, L]; None: the tip.
         full: return the 6x6 compliance d(position, rotation vector of the section at s) /
             d(force, moment at s) instead (blocks in m/N, m/(N m), rad/N, rad/(N m); rotation
             vector and loads in the world frame).
@@ -70,8 +68,6 @@ def compliance(
     if at is None:
         C, _ = compliance_and_solution(robot, act, load, gravity=gravity, solver=solver, guess=guess, throw=throw, scene=scene)
     else:
-        if isinstance(robot, Robot):
-            robot, act, load = robot.to_general(), Actuation.of(act, 1), Loads.of(load)
         args = solve_arguments(robot, act, load, gravity, guess, solver, scene)
         at = as_array("at", at, ())
         if is_concrete(robot.length):
@@ -83,7 +79,7 @@ def compliance(
 
 @jax.jit
 def _compliance_at(robot, act, load, gravity, guess, s, solver):
-    """(d(position, rotation vector at s) / d(point force, moment at s), Solution) of a Robot."""
+    """(d(position, rotation vector at s) / d(point force, moment at s), Solution)."""
 
     def pose(w):
         loads = load.with_point(s, w[:3], w[3:])
@@ -132,25 +128,17 @@ def pose_jacobian(robot, act, load, gravity, guess, solver, wrt):
     ``kinematic_jacobian`` for the columns) or a tuple of field names (``fields.py``); the rotation
     part is vee(dR R^T) in the world frame, (6, n)."""
     if wrt == "load":
-        general = isinstance(load, Loads)
-        force, moment = (load.tip_force, load.tip_moment) if general else (load.force, load.moment)
-        w = jnp.concatenate([jnp.asarray(force), jnp.asarray(moment)])
+        w = jnp.concatenate([jnp.asarray(load.tip_force), jnp.asarray(load.tip_moment)])
 
         def configure(w):
-            return robot, act, dataclasses.replace(load, tip_force=w[:3], tip_moment=w[3:]) if general else TipLoad(w[:3], w[3:])
+            return robot, act, dataclasses.replace(load, tip_force=w[:3], tip_moment=w[3:])
 
-    elif wrt == "actuation" and isinstance(act, Actuation):
+    elif wrt == "actuation":
         parts = [jnp.asarray(x, float).reshape(-1) for x in (act.tensions, act.displacements, act.insertions)]
         w, cut = jnp.concatenate(parts), np.cumsum([p.size for p in parts])
 
         def configure(w):
             return robot, Actuation._rebuild(w[: cut[0]], w[cut[1] :], w[cut[0] : cut[1]], act.driven), load
-
-    elif wrt == "actuation":
-        w = jnp.concatenate([jnp.asarray(act.tensions), jnp.reshape(jnp.asarray(act.insertion, float), (1,))])
-
-        def configure(w):
-            return robot, Actuation(w[:-1], w[-1]), load
 
     else:
         w = jnp.stack([jnp.asarray(fields.get(robot, p), float) for p in wrt])
@@ -183,8 +171,7 @@ def kinematic_jacobian(
     tension column is zero: its tension follows from its displacement.
 
     With a ``scene`` (as for ``tdct.solve``) the contact set is held: the touching candidates stay
-    on their obstacles, and the columns are a Actuation's (a Robot is solved as its
-    ``to_general()``).
+    on their obstacles.
     """
     args = solve_arguments(robot, act, load, gravity, guess, solver, scene)
     return _checked(_pose_jacobian, args, throw, "actuation")[0]
@@ -195,7 +182,7 @@ def parameter_jacobian(
     act,
     load=None,
     *,
-    params=("E_silicone",),
+    params=("sections[*].E",),
     gravity=STANDARD_GRAVITY,
     solver=DEFAULT_SOLVER,
     guess=None,
@@ -204,10 +191,9 @@ def parameter_jacobian(
 ):
     """d(tip position, tip rotation vector) / d(fields named in ``params``), (6, len(params)).
 
-    Field names as in ``fields.py``: a Robot's "E_silicone", ..., a Robot's
-    "sections[*].E", "tendons[0].offset", ... ("[*]": one value shared by every item). Units
-    follow the fields (e.g. m/Pa for E_silicone). Arguments as for ``compliance``; with a
-    ``scene`` a Robot is solved as its ``to_general()``, so ``params`` name the general fields.
+    Field names as in ``fields.py``: "sections[*].E", "tendons[0].offset", ... ("[*]": one
+    value shared by every item). Units follow the fields (e.g. m/Pa for a modulus). Arguments as
+    for ``compliance``.
     """
     args = solve_arguments(robot, act, load, gravity, guess, solver, scene)
     robot = args[0]
@@ -217,7 +203,7 @@ def parameter_jacobian(
     return _checked(_pose_jacobian, args, throw, tuple(params))[0]
 
 
-def check_params(robot: Robot | Robot, params) -> None:
+def check_params(robot: Robot, params) -> None:
     """Raises ValueError unless each of ``params`` is one of the robot's fields (``fields.check``)."""
     for p in params:
         try:
@@ -238,7 +224,11 @@ def finite_difference_compliance(robot, act, load=None, *, step: float = 1e-4, g
         dF[k] = step
         tips = [
             solve(
-                robot, act, TipLoad(np.asarray(load.force) + sign * dF, load.moment), gravity=gravity, solver=solver
+                robot,
+                act,
+                dataclasses.replace(load, tip_force=np.asarray(load.tip_force) + sign * dF),
+                gravity=gravity,
+                solver=solver,
             ).tip_position
             for sign in (1.0, -1.0)
         ]
@@ -278,8 +268,8 @@ def positions_at(sol, s):
     """The model's positions p(s) [m] at arc lengths ``s`` [m], shape s.shape + (3,).
 
     Cubic Hermite interpolation between RK4 nodes with the exact tangents p' = R v, so the
-    interpolation error is O(h^4) like RK4's own (a Solution: each interval between
-    breakpoints with its own end tangents). Arc lengths outside [0, L] are clamped to the ends.
+    interpolation error is O(h^4) like RK4's own (each interval between breakpoints with its own
+    end tangents: both sides of a breakpoint are nodes). Arc lengths outside [0, L] are clamped to the ends.
     Differentiable in the solution (for calibration); not in ``s``.
     """
     nodes, p = sol.s, sol.position
@@ -291,13 +281,6 @@ def positions_at(sol, s):
     h = h[..., None]
     tangent = jnp.einsum("nij,nj->ni", sol.rotation, sol.strain)
     hm0 = h * tangent[k]
-    if not isinstance(sol, Solution):  # a Solution has both sides of every breakpoint
-        # The node at s = d carries the backbone's strain, but p' jumps there (the silicone shears):
-        # the first silicone interval takes its left tangent from a one-sided cubic through 4 nodes.
-        j = (n - 1) // 2
-        q = p[jnp.minimum(j + jnp.arange(4), n - 1)]
-        h_right_of_d = jnp.broadcast_to((-11 * q[0] + 18 * q[1] - 9 * q[2] + 2 * q[3]) / 6, t.shape[:-1] + (3,))
-        hm0 = jnp.where(((k == j) & (nodes[j] > 0))[..., None], h_right_of_d, hm0)
     p0, p1, hm1 = p[k], p[k + 1], h * tangent[k + 1]
     return (2 * t**3 - 3 * t**2 + 1) * p0 + (t**3 - 2 * t**2 + t) * hm0 + (-2 * t**3 + 3 * t**2) * p1 + (t**3 - t**2) * hm1
 

@@ -2,9 +2,9 @@
 
 The chain of RK4 steps of single shooting splits into K intervals of equal step count, each
 integrated with ``vmap`` from its own start State. The chain is the robot's P breakpoint
-intervals (``general.plan``; the paper robot's two, [0, d] and [d, L]) of ``steps`` steps each, K
-dividing P * steps (``general.check_intervals``): cut into pieces of g = gcd(P steps / K,
-steps) steps (``general.pieces``), each inside one breakpoint interval, P steps / (K g) of them an
+intervals (``rod.plan``; the paper robot's two, [0, d] and [d, L]) of ``steps`` steps each, K
+dividing P * steps (``rod.check_intervals``): cut into pieces of g = gcd(P steps / K,
+steps) steps (``rod.pieces``), each inside one breakpoint interval, P steps / (K g) of them an
 interval; K = P q (q dividing steps) makes every breakpoint a boundary, each breakpoint interval
 cut into q, and K dividing P gives each interval P / K whole breakpoint intervals. A breakpoint's
 jump (dN, dM: point loads and masses) is applied at the start of the piece after it, so at an
@@ -39,9 +39,8 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
-from . import general, shooting
+from . import rod, shooting
 from .newton import continuation, damped
 from .segments import State
 from .so3 import hat, orthonormalize
@@ -85,7 +84,7 @@ def check(robot, load, solver) -> None:
     K = solver.intervals
     if K == 1:
         return
-    general.check_intervals(robot, load, solver)
+    rod.check_intervals(robot, load, solver)
     if solver.transition != "balanced" or solver.tendon_model != "exact":
         raise ValueError(
             f"solver intervals = {K} with transition = {solver.transition!r}, tendon_model = {solver.tendon_model!r}: "
@@ -130,26 +129,26 @@ class Run(NamedTuple):
 
 def run(robot, act, load, gravity, solver, x, starts, F_c, path: bool = False) -> Run:
     """Every interval integrated from its start (R, N, M) (K, ...): the breakpoint intervals cut by
-    ``general.pieces``, the driven tensions from x[6:] in every interval."""
+    ``rod.pieces``, the driven tensions from x[6:] in every interval."""
     R, N, M = starts
     K = solver.intervals
     y0 = State(jnp.zeros((K, 3)), R, N, M)
-    act = general.with_driven(act, x, F_c)
-    pl = general.plan(robot, act, load, gravity)
-    ps, g = general.pieces(pl, solver.steps, K)
+    act = rod.with_driven(act, x, F_c)
+    pl = rod.plan(robot, act, load, gravity)
+    ps, g = rod.pieces(pl, solver.steps, K)
     l0 = jnp.zeros((K, robot.n_tendons)) if act.driven or path else None
-    end, nodes = jax.vmap(lambda p, c: general.integrate(robot, load, gravity, p, c, g, path, rotation=solver.rotation))(
-        ps, general.Carry(y0, None, l0)
+    end, nodes = jax.vmap(lambda p, c: rod.integrate(robot, load, gravity, p, c, g, path, rotation=solver.rotation))(
+        ps, rod.Carry(y0, None, l0)
     )
     return Run(end.y, jnp.zeros((K, 0)) if l0 is None else end.l, act, pl, nodes)
 
 
 def _closing(robot, load, r: Run, N, M, lengths, x, F_c):
     """The closing residual at the tip's N, M (before the jump at L) with the tendon lengths summed
-    over the intervals and x: tip (6,), then the driven tendons (``general.closing``); and its
+    over the intervals and x: tip (6,), then the driven tendons (``rod.closing``); and its
     slack flags."""
-    act = general.with_driven(r.act, x, F_c)
-    return general.closing(robot, act, load, r.plan, State(None, None, N, M), lengths, F_c)
+    act = rod.with_driven(r.act, x, F_c)
+    return rod.closing(robot, act, load, r.plan, State(None, None, N, M), lengths, F_c)
 
 
 def _closing_at(robot, load, u: Unknowns, r: Run, F_c):
@@ -248,13 +247,13 @@ def jacobians(blocks: Blocks):
 
 def coarse(robot, act, load, gravity, solver, x, F_c) -> Unknowns:
     """Interior starts from the scaled x by one cheap pass: one RK4 step per piece of
-    ``general.pieces``."""
+    ``rod.pieces``."""
     L = robot.length
     y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:6] * F_c * L)
-    act = general.with_driven(act, x, F_c)
-    ps, g = general.pieces(general.plan(robot, act, load, gravity), solver.steps, solver.intervals)
+    act = rod.with_driven(act, x, F_c)
+    ps, g = rod.pieces(rod.plan(robot, act, load, gravity), solver.steps, solver.intervals)
     flat = jax.tree.map(lambda a: a.reshape(-1, *a.shape[2:]), ps)._replace(h=ps.h.reshape(-1) * g)
-    _, nodes = general.integrate(robot, load, gravity, flat, general.Carry(y0), 1, path=True, rotation=solver.rotation)
+    _, nodes = rod.integrate(robot, load, gravity, flat, rod.Carry(y0), 1, path=True, rotation=solver.rotation)
     ys = jax.tree.map(lambda a: a[ps.h.shape[1] - 1 :: ps.h.shape[1], 1][:-1], nodes.y)
     R = ys.R
     for _ in range(ORTHONORMALIZE):  # a long step leaves R off SO(3); Newton's steps keep it on
@@ -311,7 +310,7 @@ def _root_jvp(primals, tangents):
 
 def path(robot, act, load, gravity, solver, u: Unknowns):
     """``shooting.shoot``'s residual and path from the Unknowns, the intervals integrated side by
-    side: (nodes, plan, actuation, lengths, slack) as ``general.shoot`` gives them (each interior
+    side: (nodes, plan, actuation, lengths, slack) as ``rod.shoot`` gives them (each interior
     start node the previous interval's end)."""
     F_c = shooting.force_scale(robot, act, load, gravity)
     res, r = evaluate(robot, act, load, gravity, solver, u, F_c, path=True)
@@ -322,8 +321,8 @@ def path(robot, act, load, gravity, solver, u: Unknowns):
     n_b = r.plan.b.size - 1
 
     def by_breakpoint_interval(a):  # pieces (K, c / g, g + 1, ...) -> (P, steps + 1, ...)
-        return general.by_interval(a.reshape(-1, *a.shape[2:]), n_b)
+        return rod.by_interval(a.reshape(-1, *a.shape[2:]), n_b)
 
     lengths = jnp.sum(r.lengths, 0)
     slack = _closing_at(robot, load, u, r, F_c)[1]
-    return tail, (general.Carry(jax.tree.map(by_breakpoint_interval, ys)), r.plan, r.act, lengths, slack, None)
+    return tail, (rod.Carry(jax.tree.map(by_breakpoint_interval, ys)), r.plan, r.act, lengths, slack, None)

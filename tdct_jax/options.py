@@ -30,7 +30,8 @@ class SolverOptions:
     compiles once); ``tol`` and ``max_iter`` are leaves, so changing them does not recompile.
 
     Attributes:
-        steps: RK4 steps per segment (backbone [0, d] and silicone-only [d, L]).
+        steps: RK4 steps per breakpoint interval (the paper's robot: backbone [0, d] and
+            silicone-only [d, L]).
         transition: "balanced" (total rod + tendon force and moment continuous at s = d) or
             "paper" (rod force and moment continuous, eqs. 31-32 as printed).
         tendon_model: tendon load in the backbone segment, "exact" (Rucker-Webster, tangents
@@ -43,9 +44,9 @@ class SolverOptions:
         intervals: shooting intervals K (static): 1 integrates from the base to the tip in one
             chain of RK4 steps (single shooting); K > 1 splits the chain into K intervals of equal
             step count integrated side by side, their start states unknowns too (multiple
-            shooting, docs/performance.md). The chain is the paper robot's 2 * steps steps, or a
-            Robot's P * steps (P breakpoint intervals, ``steps`` each; every breakpoint an
-            interval boundary when K = P q, q dividing ``steps``); K must divide it, checked
+            shooting, docs/performance.md). The chain is the robot's P * steps steps (P breakpoint
+            intervals, ``steps`` each: the paper's robot has two; every breakpoint an interval
+            boundary when K = P q, q dividing ``steps``); K must divide it, checked
             when a solve is traced (ValueError naming the allowed values).
         rotation: how RK4 carries the rotation R (static; the same numbers to round-off):
             "columns", R's three columns as three arrays, or "matrix", R whole. Columns keep a

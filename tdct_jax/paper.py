@@ -6,7 +6,6 @@ Grids default to the paper's; the constants below hold the numbers the paper rep
 
 from __future__ import annotations
 
-import dataclasses
 from typing import NamedTuple
 
 import jax
@@ -14,9 +13,11 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
+from . import fields
+from .description import Robot
 from .ik import Bounds, LeastTension, Stiffness, Target, inverse_kinematics
-from .lm import levenberg_marquardt
 from .inputs import Actuation, Loads
+from .lm import levenberg_marquardt
 from .manipulation import capacity, insertion_optimum, load_capacity, optimal_insertion
 from .mechanics import compliance, compliance_ellipsoid
 from .options import DEFAULT_SOLVER
@@ -147,7 +148,7 @@ def bending_range(robot: Robot, tensions=TABLE3_TENSIONS, insertions=TABLE3_INSE
 
 
 class Fit(NamedTuple):
-    """Least-squares fit of Robot fields to the paper's ten load capacities.
+    """Least-squares fit of robot fields to the paper's ten load capacities.
 
     values: fitted fields by name (SI). capacities_g, paper_g: model and paper, (2, 5): rows
     without tube and with 70 mm, columns 6..10 N. residual_percent: relative misfit [%].
@@ -162,9 +163,10 @@ class Fit(NamedTuple):
 
 
 def fit_load_capacities(
-    robot: Robot, params=("tendon_offset",), *, max_steps: int = 12, xtol: float = 1e-8, progress=print, solver=DEFAULT_SOLVER
+    robot: Robot, params=("tendons[*].offset",), *, max_steps: int = 12, xtol: float = 1e-8, progress=print, solver=DEFAULT_SOLVER
 ) -> Fit:
-    """Fits Robot fields to the ten load capacities of Sec. V.A by Levenberg-Marquardt in log space.
+    """Fits robot fields (fields.py names: "tendons[*].offset", "sections[*].density", ...) to the
+    ten load capacities of Sec. V.A by Levenberg-Marquardt in log space.
 
     Residuals are relative misfits (model - paper) / paper; the Jacobian is exact (jacfwd through
     the implicitly differentiated capacity root, vmapped over the ten conditions). ``max_steps``
@@ -175,7 +177,7 @@ def fit_load_capacities(
     target = G * np.asarray(PAPER_CAPACITIES_G).ravel()
 
     def residual(log_values):
-        r = dataclasses.replace(robot, **{p: jnp.exp(log_values[i]) for i, p in enumerate(params)})
+        r = robot.replace({p: jnp.exp(log_values[i]) for i, p in enumerate(params)})
         c = jax.vmap(lambda t, d: capacity(r, Actuation(t, d), solver=solver, throw=False))(tensions, depths)
         misfit = (c.mass - target) / target
         return misfit, (misfit, c.result)
@@ -189,7 +191,7 @@ def fit_load_capacities(
     def report(it, r, step):
         progress(f"  fit iteration {it}: rms misfit {100 * np.sqrt(np.mean(np.square(r))):.3f}%, step {np.abs(step).max():.2e}")
 
-    x0 = np.log([float(getattr(robot, p)) for p in params])
+    x0 = np.log([fields.value(robot, p) for p in params])
     fit = levenberg_marquardt(evaluate, x0, max_steps=max_steps, xtol=xtol, callback=report if progress else None)
     mass = fit.residual * target + target
     return Fit(
@@ -254,7 +256,7 @@ def _reach(robot: Robot, positions, axes: str, chunk: int, bar=None, label: str 
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
-def _compliance_along(robot: Robot, reached: dict, direction, load: TipLoad, bar=None) -> np.ndarray:
+def _compliance_along(robot: Robot, reached: dict, direction, load: Loads, bar=None) -> np.ndarray:
     """direction^T CM direction [m/N] at each actuation ``_reach`` found, NaN where it did not reach."""
     out = []
     for t, d, code in zip(reached["tensions"], reached["insertion"], reached["result"], strict=True):
@@ -321,7 +323,7 @@ class HighestReach(NamedTuple):
 
 
 @jax.jit
-def _refine(robot: Robot, load: TipLoad, tension, lo, hi, solver):
+def _refine(robot: Robot, load: Loads, tension, lo, hi, solver):
     """The insertion in [lo, hi] [m] that maximises y_tip with ``tension`` [N] on tendon 1
     (``insertion_optimum``), and there: y_tip [m], its exact gradient (d/dtau [m/N], d/dd), the
     compliance along -y [m/N], and whether every step converged. One compiled program."""

@@ -72,9 +72,23 @@ def _finish(fig, path):
     return fig
 
 
+def _starts(s) -> np.ndarray:
+    """True at the nodes that start an interval: the base and the right side of each breakpoint
+    (nodes come interval by interval, both sides of every breakpoint at the same arc length)."""
+    s = np.asarray(s)
+    return np.r_[True, np.diff(s) <= 0] if s.size else np.zeros(0, bool)
+
+
+def _upto(s, x) -> np.ndarray:
+    """True at the nodes of the intervals inside [0, x]: those before x, and at a breakpoint x its
+    left side only."""
+    s = np.asarray(s)
+    return (s < x - 1e-12) | ((np.abs(s - x) <= 1e-12) & ~_starts(s))
+
+
 def _tube_mask(s, insertion):
     """True at the nodes inside the tube, [0, d]."""
-    return np.asarray(s) <= insertion + 1e-12 if insertion > 0 else np.zeros(np.shape(s), bool)
+    return _upto(s, insertion) if insertion > 0 else np.zeros(np.shape(s), bool)
 
 
 @_styled
@@ -122,7 +136,7 @@ def plot_shape(sol: Solution, insertion: float, path: str | Path | None = None, 
 
 
 @_styled
-def plot_robot(sol, robot, act=None, load=None, path: str | Path | None = None, title: str | None = None):
+def plot_robot(sol, robot, act=None, load=None, path: str | Path | None = None, title: str | None = None, target=None):
     """Side view (world z-y), top view (z-x) and 3D view of a solved ``Robot``, in mm: the
     body coloured by section, each tube's insertion shaded, every tendon along the body from the
     base to its anchor (a dot, its number beside it in 3D, in its anchor section's colour), point
@@ -135,19 +149,23 @@ def plot_robot(sol, robot, act=None, load=None, path: str | Path | None = None, 
     Args:
         sol: a single (unbatched) Solution of ``robot`` (with ``sol.contact`` for a scene).
         robot: the Robot solved.
-        act, load: its Actuation (tube depths) and Loads (or TipLoad; ``load.scene``: the
-            obstacles it was solved with); None: none.
+        act, load: its Actuation (tube depths) and Loads (``load.scene``: the obstacles it was
+            solved with); None: none.
         path: where to save a PNG; the figure is returned either way.
         title: figure title.
+        target: a target tip position [m], (3,), marked with a cross (inverse kinematics).
     """
     from .inputs import Actuation, Loads
 
     plt = _pyplot()
-    act, load = Actuation.of(act, robot.n_tubes), Loads.of(load)
+    act, load = Actuation.of(act, robot), Loads.of(load)
     s, p, R = np.asarray(sol.s), np.asarray(sol.position) * 1e3, np.asarray(sol.rotation)
     length = float(robot.length)
     ends = [float(sec.end) for sec in robot.sections]
     starts = [0.0, *ends[:-1]]
+    # each node's section: at a section end, its left side in the section that ends, its right side in the next
+    section = np.where(_starts(s), np.searchsorted(ends, s, side="right"), np.searchsorted(ends, s - 1e-12))
+    section = section.clip(0, len(ends) - 1)
     colours = [plt.cm.tab10(j % 10) for j in range(len(ends))]
     anchors = [length if t.end is None else float(t.end) for t in robot.tendons]
     at = [int(np.searchsorted(ends, a - 1e-12)) for a in anchors]  # each anchor's section
@@ -159,34 +177,36 @@ def plot_robot(sol, robot, act=None, load=None, path: str | Path | None = None, 
     forces = [(float(x), np.asarray(f)) for x, f in zip(np.asarray(load.point_s), np.asarray(load.point_force), strict=True)]
     forces += [(length, np.asarray(load.tip_force))] if np.any(np.asarray(load.tip_force)) else []
     scene = load.scene
-    radius = 1e3 * np.array(
-        [float(robot.sections[j].outer_diameter) / 2 for j in np.searchsorted(ends, s - 1e-12).clip(0, len(ends) - 1)]
-    )
+    radius = 1e3 * np.array([float(robot.sections[j].outer_diameter) / 2 for j in section])
     touching = _touching(sol, scene, radius, s) if scene is not None else []
     biggest = max([np.linalg.norm(f) for _, f in forces] + [np.linalg.norm(f) for _, f in touching], default=0.0)
     arrows = [(p[_node(s, x)], 0.2 * length * 1e3 * f / biggest) for x, f in forces if np.linalg.norm(f) > 0]
     pushes = [(q, 0.2 * length * 1e3 * f / biggest) for q, f in touching]
+    marked = [] if target is None else [np.asarray(target, dtype=float) * 1e3]
 
     fig = plt.figure(figsize=(17, 5.6), layout="constrained")
     views = [fig.add_subplot(1, 3, 1), fig.add_subplot(1, 3, 2), fig.add_subplot(1, 3, 3, projection="3d")]
     for ax, cols in zip(views, ((2, 1), (2, 0), (0, 2, 1)), strict=True):
         xyz = functools.partial(_columns, cols=cols)
         for j, d in enumerate(np.asarray(act.insertions)):
-            inside = s <= d + 1e-12
+            inside = _tube_mask(s, d)
             if d > 0:
                 label = f"tube {j + 1} inserted {d * 1e3:g} mm"
                 ax.plot(*xyz(p[inside]), color="0.3", lw=10 + 4 * j, alpha=0.25, solid_capstyle="butt", label=label)
         for j, (a, b) in enumerate(zip(starts, ends, strict=True)):
-            piece = (s >= a - 1e-12) & (s <= b + 1e-12)
+            piece = (s >= a - 1e-12) & (s <= b + 1e-12)  # at a section end both sides: the same point
             ax.plot(*xyz(p[piece]), color=colours[j], lw=3.5, label=f"section {j + 1}: {a * 1e3:g}-{b * 1e3:g} mm")
         for i, (q, a) in enumerate(zip(paths, anchors, strict=True)):
-            on = s <= a + 1e-12
+            on = _upto(s, a)
+            on[0] = True
             ax.plot(*xyz(q[on]), color=colours[at[i]], lw=1.1, alpha=0.8)
             ax.plot(*xyz(q[on][-1]), "o", color=colours[at[i]], mec="black", ms=5)
             if len(cols) == 3:
                 ax.text(*xyz(q[on][-1]), f" {i + 1}", fontsize="small")
         for disk in disks:
             ax.plot(*xyz(disk), color="saddlebrown", lw=2)
+        for q in marked:
+            ax.plot(*xyz(q[None]), "x", color="tab:green", ms=10, mew=2)
         for (base, vec), colour in [*((a, "tab:red") for a in arrows), *((a, "tab:green") for a in pushes)]:
             if len(cols) == 3:
                 ax.quiver(*xyz(base), *xyz(vec), color=colour, lw=2, arrow_length_ratio=0.2)
@@ -209,7 +229,9 @@ def plot_robot(sol, robot, act=None, load=None, path: str | Path | None = None, 
         if pushes:
             largest = max(np.linalg.norm(f) for _, f in touching)
             side.plot([], [], color="tab:green", lw=2, label=f"contact forces on the robot (largest {largest:.3g} N)")
-    every = np.concatenate([p, *paths, *disks, *(np.stack([b, b + v]) for b, v in arrows + pushes)])
+    if marked:
+        side.plot([], [], "x", color="tab:green", ms=10, mew=2, label="target")
+    every = np.concatenate([p, *paths, *disks, *(np.stack([b, b + v]) for b, v in arrows + pushes), *(q[None] for q in marked)])
     if scene is not None:
         every = np.concatenate([every, _scene_points(scene, p)])
     for ax, (h, v), name in ((side, (2, 1), "side view"), (top, (2, 0), "top view")):
@@ -245,7 +267,12 @@ def _touching(sol, scene, radius, s) -> list:
 def _outline(ax, q, radius):
     """The body's silhouette in a flat view: the centreline q (n, 2) [mm] offset by the radius
     (n,) [mm] to both sides of its tangent."""
-    t = np.gradient(q, axis=0)
+    if len(q) < 2:
+        return
+    distinct = np.r_[True, np.any(np.diff(q, axis=0) != 0, axis=1)]  # the nodes on both sides of a breakpoint: once
+    if distinct.sum() < 2:
+        return
+    t = np.gradient(q[distinct], axis=0)[np.cumsum(distinct) - 1]
     t = t / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
     side = np.stack([-t[:, 1], t[:, 0]], 1) * radius[:, None]
     for sign in (1, -1):

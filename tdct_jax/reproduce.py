@@ -8,7 +8,6 @@ progress on stderr (progress bars, step headers).
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import platform
 import sys
@@ -18,7 +17,8 @@ from time import perf_counter
 import jax
 import numpy as np
 
-from . import paper, plotting
+from . import fields, paper, plotting
+from .description import Robot
 from .inputs import Actuation, Loads
 
 FULL = dict(
@@ -71,10 +71,10 @@ def reproduce(
     Args:
         out: output folder (created).
         quick: coarse grids and no parameter fit (see QUICK).
-        robot: the robot (default: ``Robot()``).
+        robot: the robot (default: ``Robot.paper()``).
         progress: progress bars and step headers on stderr.
     """
-    robot = Robot() if robot is None else robot
+    robot = Robot.paper() if robot is None else robot
     grids = QUICK if quick else FULL
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -116,7 +116,7 @@ def reproduce(
         total_seconds=total,
         seconds_per_study=timings,
         machine=f"{platform.machine()}, {jax.device_count()} x {jax.devices()[0].platform}, jax {jax.__version__}",
-        robot={f.name: np.asarray(getattr(robot, f.name)).tolist() for f in dataclasses.fields(robot)},
+        robot={name: np.asarray(fields.get(robot, name)).tolist() for name in fields.names(robot)},
         headlines=rows,
         figures=sorted(p.name for p in out.glob("*.png")),
     )
@@ -208,17 +208,18 @@ def _table3(robot, grids, out, opts, say):
 
 
 def _fit(robot, grids, out, opts, say):
-    start = dataclasses.replace(robot, tendon_offset=6e-3, density_silicone=1130.0)
+    offset, density = "tendons[*].offset", "sections[*].density"
+    start = robot.replace({offset: 6e-3, density: 1130.0})
     say("  from tendon offset 6 mm and the handbook density 1130 kg/m^3")
     rows = []
-    for params in (("tendon_offset",), ("tendon_offset", "density_silicone")):
+    for params in ((offset,), (offset, density)):
         fit = paper.fit_load_capacities(start, params, progress=say if opts["progress"] else None)
         rms = float(np.sqrt(np.mean(np.square(fit.residual_percent))))
         note = f"fit of {' and '.join(params)}: rms misfit {rms:.2f}%, worst {np.abs(fit.residual_percent).max():.2f}%"
         note += f", {fit.iterations} iterations" + ("" if fit.converged else ", NOT converged")
-        rows.append(_row("fitted tendon offset", 1e3 * fit.values["tendon_offset"], None, "mm", note))
-        if "density_silicone" in fit.values:
-            rows.append(_row("fitted effective silicone density", fit.values["density_silicone"], None, "kg/m^3", note))
+        rows.append(_row("fitted tendon offset", 1e3 * fit.values[offset], None, "mm", note))
+        if density in fit.values:
+            rows.append(_row("fitted effective silicone density", fit.values[density], None, "kg/m^3", note))
     return rows
 
 
@@ -272,10 +273,9 @@ def _contact(robot, grids, out, opts, say):
     title = f"tip on a table {-1e3 * paper.TABLE_HEIGHT:g} mm below the axis, tendon 3 at {paper.CONTACT_TENSION:g} N"
     plotting.plot_contact_press(res, out / "contact_press.png", title=title)
     sol, scene, act = paper.body_contact(robot)
-    general = robot.to_general()
     load = Loads().with_scene(scene)
     title = f"over a cylinder, tendon 3 at {paper.CYLINDER_TENSION:g} N, no tube"
-    plotting.plot_robot(sol, general, Actuation.of(act, general.n_tubes), load, out / "contact_cylinder.png", title=title)
+    plotting.plot_robot(sol, robot, Actuation.of(act, robot), load, out / "contact_cylinder.png", title=title)
     ok = res["result"] == 0
     note = f"tendon 3 at {paper.CONTACT_TENSION:g} N; {np.count_nonzero(~ok)} of {ok.size} insertions not converged"
     f = np.where(ok, res["force"], np.nan)

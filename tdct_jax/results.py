@@ -25,7 +25,7 @@ UNITS = {
     "tip_mass": "kg",
     "point_force": "N",
     "point_moment": "Nm",
-    "E_silicone": "Pa",
+    "E_silicone": "Pa",  # the former paper names (fields.PAPER_NAMES), still accepted with a FutureWarning
     "E_tube": "Pa",
     "E": "Pa",
     "mass": "kg",
@@ -37,8 +37,8 @@ UNITS = {
 
 
 def unit_of(name: str) -> str:
-    """The SI unit of a sweepable input or robot field (a Robot's ``sections[*].E`` by its
-    last part), as written in CSV column names."""
+    """The SI unit of a sweepable input or robot field (``sections[*].E`` by its last part), as
+    written in CSV column names."""
     name = name.rsplit(".", 1)[-1]
     if name in UNITS:
         return UNITS[name]
@@ -118,8 +118,8 @@ class SweepResult(GridResult):
             M(0) [N m]): as on ``Solution``.
         s, position: arc length [m] and shape [m] at the RK4 nodes (with ``shapes=True``).
         compliance: 3x3 tip compliance [m/N] (with ``compliance=True``; NaN where not converged).
-        tensions: a Robot's tendon tensions [N], (n_tendons,): the given ones and those
-            found for displacement-driven tendons (slack: exactly 0); None for a Robot.
+        tensions: the tendon tensions [N], (n_tendons,): the given ones and those found for
+            displacement-driven tendons (slack: exactly 0).
     """
 
     tip_position: np.ndarray

@@ -34,12 +34,12 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from . import fields, general, status
+from . import fields, rod, roots, status
 from .checks import as_array, check_range, is_concrete, read_toml
 from .description import Robot
 from .inputs import STANDARD_GRAVITY, Actuation, Loads
 from .options import DEFAULT_SOLVER, SolverOptions
-from .shooting import force_scale, root, shoot, unscaled
+from .shooting import force_scale, shoot, unscaled
 from .tree import pytree, set_fields
 
 RAMP = 8
@@ -155,7 +155,7 @@ class Rig:
     def displacements(self, servo):
         """Commanded tendon displacements [m] for servo readings [m], (..., n_t)."""
         EA = jnp.stack([jnp.asarray(t.stiffness, float) for t in self.robot.tendons])
-        return self.scale * servo + self.pretension * general.rest_lengths(self.robot) / EA
+        return self.scale * servo + self.pretension * rod.rest_lengths(self.robot) / EA
 
     def to_measured(self, p):
         """Points p (..., 3) in the robot base frame, in the measurement frame."""
@@ -255,11 +255,9 @@ def solve_sample(rig: Rig, servo, guess, solver: SolverOptions = DEFAULT_SOLVER)
     n = robot.n_tendons
     guess = lax.stop_gradient(guess)
     warm = jnp.all(jnp.isfinite(guess))
-    act = Actuation._rebuild(
-        jnp.where(warm, guess[6:], 0.0), jnp.zeros(robot.n_tubes), rig.displacements(servo), tuple(range(n))
-    )
+    act = Actuation._rebuild(jnp.where(warm, guess[6:], 0.0), jnp.zeros(robot.n_tubes), rig.displacements(servo), tuple(range(n)))
     problem = (robot, act, Loads(), rig.gravity)
-    x, info = root(*problem, jnp.where(warm, guess, jnp.nan), solver)
+    x, info = roots.root(*problem, jnp.where(warm, guess, jnp.nan), solver)
     F_c = force_scale(*problem)
     tip = shoot(*problem, solver, x, F_c)[1]
     return rig.to_measured(tip.p), unscaled(robot, x, F_c), info.result.astype(jnp.int32)

@@ -16,7 +16,7 @@ def root(robot, act, load, gravity, guess, solver):
 
 
 def path(robot, act, load, gravity, guess, solver):
-    """``root``, then the residual and the path along the robot there, as ``general.shoot`` gives
+    """``root``, then the residual and the path along the robot there, as ``rod.shoot`` gives
     them: (x, RootInfo, residual, path). Multiple shooting's path comes from its intervals side
     by side."""
     if solver.intervals > 1:

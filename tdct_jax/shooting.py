@@ -2,7 +2,7 @@
 
 The unknowns x are the total force and moment at the base, N(0) and M(0), scaled by a typical
 force F_c (and F_c L), then any displacement-driven tendons' tensions and contact forces: the
-robot is integrated from the base across its breakpoint intervals (general.py), and the residual
+robot is integrated from the base across its breakpoint intervals (rod.py), and the residual
 is the mismatch with the tip load, scaled the same way (docs/model.md, "Shooting"). Multiple
 shooting (multiple.py) builds on this module; roots.py chooses between the two.
 """
@@ -19,11 +19,12 @@ from jax import lax
 from . import status
 from .contact import SMOOTHING
 from .description import Robot
-from .general import force_scale, shoot, straight_rod
 from .inputs import Actuation, Loads
 from .newton import broyden, continuation, lazily, unset_root
 from .options import SolverOptions
+from .rod import force_scale, shoot, straight_rod
 from .so3 import rotation_columns
+
 
 def scaled(robot: Robot, wrench, F_c):
     """A base wrench (N(0) [N], M(0) [N m]) as scaled unknowns; entries beyond the sixth (a

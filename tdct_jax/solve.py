@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import general, multiple, roots, status
+from . import multiple, rod, roots, status
 from .checks import as_array, is_concrete
 from .description import Robot
 from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
@@ -25,7 +25,7 @@ def tip_angle(R):
 class Solution:
     """Static shape of the robot at the RK4 nodes.
 
-    Nodes come interval by interval (general.py: the intervals between section ends, tube
+    Nodes come interval by interval (rod.py: the intervals between section ends, tube
     depths, tendon anchors and point loads), ``steps + 1`` each: both sides of every breakpoint
     appear, ``total_force`` and ``total_moment`` jumping at point loads. The paper's robot has
     two intervals, [0, d] and [d, L].
@@ -127,11 +127,11 @@ def _assembled(robot, act, load, gravity, solver, ys, res, info) -> Solution:
     interval by interval, steps + 1 each, so that both sides of every breakpoint appear (the node
     at an interval's start is after the breakpoint's jump)."""
     nodes, pl, act, lengths, slack, touching = ys
-    s, y, (v, u, n, m) = general.node_quantities(robot, act, load, gravity, nodes, pl, solver.tendon_model)
+    s, y, (v, u, n, m) = rod.node_quantities(robot, act, load, gravity, nodes, pl, solver.tendon_model)
     # a slack tendon's tension is zero to round-off at the root (the Fischer-Burmeister row is
     # linear in it there): reported as exactly zero; a driven tendon's encoder reads its command
     tensions = jnp.where(slack, 0.0, jnp.asarray(act.tensions, float))
-    displacements = general.displacements(robot, act, lengths)
+    displacements = rod.displacements(robot, act, lengths)
     if act.driven:
         displacements = displacements.at[np.asarray(act.driven)].set(act.displacements)
     result = info.result if touching is None else status.contact_result(info.result, touching.gap, 2 * solver.tol * robot.length)
@@ -228,7 +228,7 @@ def problem(robot, act, load, solver, scene=None, *, batch: bool = False) -> tup
                 raise ValueError(
                     f"{name} has shape {np.shape(x)}: one configuration is expected here; solve a batch with tdct.sweep or jax.vmap"
                 )
-    general.check_arguments(robot, act, load, solver)
+    rod.check_arguments(robot, act, load, solver)
     multiple.check(robot, load, solver)
     return robot, act, load
 

@@ -9,7 +9,7 @@ A spec, SI units throughout (every key but one table of points is optional)::
     compliance = false
     warm_start = false        # grid only: solve along the last axis in order
 
-    [base]                    # what every point shares: tensions [N], insertion [m], force [N], moment [N m]
+    [base]                    # what every point shares: tensions [N], insertion(s) [m], force [N], moment [N m]
     tensions = [0.0, 0.0, 0.0, 2.0]
 
     [solver]                  # SolverOptions fields: steps, transition, tendon_model, tol, max_iter
@@ -20,13 +20,15 @@ A spec, SI units throughout (every key but one table of points is optional)::
     tensions = {linspace = [0.0, 10.0, 11], tendons = [1]}   # tendon 1 swept, the others as in [base]
     tip_mass = [0.0, 0.02, 0.05]                             # explicit values; vectors as lists of lists
 
-The robot file may be a general robot file (``[[sections]]``, ``[[tendons]]``, ...; read by
-``tdct.Robot.from_toml``). Its spec's [base] takes "tensions" (one per tendon), "insertions" (one
-per tube), "driven" (the displacement-driven tendons, numbered from 1 as ``tendons = [...]``
-is) and their "displacements" [m], "force", "moment", and point loads "point_s" [m],
-"point_force", "point_moment" (lists of [x, y, z]); its [grid] or [batch] the names of
-``tdct.sweep`` for a Robot (a linspace of "displacements" picks driven tendons by number,
-``tendons = [1]``), fields quoted as TOML keys: ``"sections[*].E" = [50e9, 60e9]``.
+The robot file is a robot file (``[[sections]]``, ``[[tendons]]``, ...; read by
+``tdct.Robot.from_toml``), or the paper's robot with Table II values by name; a [robot] table in
+the spec holds the latter (``E_silicone = 1.1e6``, as ``tdct.Robot.paper`` takes them). [base]
+takes "tensions" (one per tendon), "insertions" (one per tube; "insertion" for a robot with one
+tube), "driven" (the displacement-driven tendons, numbered from 1 as ``tendons = [...]`` is) and
+their "displacements" [m], "force", "moment", and point loads "point_s" [m], "point_force",
+"point_moment" (lists of [x, y, z]); [grid] or [batch] the names of ``tdct.sweep`` (a linspace of
+"displacements" picks driven tendons by number, ``tendons = [1]``), fields quoted as TOML keys:
+``"sections[*].E" = [50e9, 60e9]``.
 """
 
 from __future__ import annotations
@@ -36,18 +38,28 @@ from pathlib import Path
 
 import numpy as np
 
-from . import general
+from . import rod
 from .checks import check_integer, read_toml
-from .description import Robot
+from .description import PAPER, Robot
 from .inputs import STANDARD_GRAVITY, Actuation, Loads
 from .options import SolverOptions
 from .sweep import check_points
 
 OPTIONS = ("chunk_size", "shapes", "compliance", "warm_start", "gravity")
 TABLES = ("robot", "base", "solver", "grid", "batch")
-BASE = ("tensions", "insertion", "force", "moment")
-GENERAL_BASE = ("tensions", "insertions", "driven", "displacements", "force", "moment", "point_s", "point_force", "point_moment")
-"""[base] keys for a Robot, and for a Robot."""
+BASE = (
+    "tensions",
+    "insertion",
+    "insertions",
+    "driven",
+    "displacements",
+    "force",
+    "moment",
+    "point_s",
+    "point_force",
+    "point_moment",
+)
+"""[base] keys ("insertion": the depth of a robot's one tube)."""
 PICKS = {"tensions": "tendons", "displacements": "tendons", "force": "components", "moment": "components"}
 """Vector inputs a linspace can sweep part of: the key that names the entries it sets."""
 COMPONENTS = ("x", "y", "z")
@@ -100,38 +112,34 @@ def _arguments(data: dict, folder: Path) -> dict:
     if isinstance(robot, str):
         robot = Robot.from_toml(folder / robot)
     elif isinstance(robot, dict):
-        _known("[robot] ", robot, [f.name for f in dataclasses.fields(Robot)])
-        robot = _built("robot", Robot, **robot)
+        _known("[robot] ", robot, sorted(PAPER))
+        robot = _built("robot", Robot.paper, **robot)
     else:
-        raise ValueError(f'robot = {robot!r} must be a robot file (robot = "robot.toml") or a [robot] table of Robot fields')
+        raise ValueError(
+            f'robot = {robot!r} must be a robot file (robot = "robot.toml") or a [robot] table of the paper\'s values'
+        )
     base = _table(data, "base")
     zero = (0.0, 0.0, 0.0)
-    if isinstance(robot, Robot):
-        _known("[base] ", base, GENERAL_BASE)
-        driven, n = base.get("driven", []), robot.n_tendons
-        if not (isinstance(driven, list) and all(i in range(1, n + 1) and not isinstance(i, bool) for i in driven)):
-            raise ValueError(f"[base] driven = {driven!r} must list tendons numbered 1 to {n} (1 for the first)")
-        act = _built(
-            "base",
-            Actuation,
-            tensions=base.get("tensions", np.zeros(robot.n_tendons)),
-            insertions=base.get("insertions", np.zeros(robot.n_tubes)),
-            displacements=base.get("displacements", np.zeros(len(driven))),
-            driven=tuple(i - 1 for i in driven),
-        )
-        point_loads = {k: base[k] for k in ("point_s", "point_force", "point_moment") if k in base}
-        load = _built("base", Loads, tip_force=base.get("force", zero), tip_moment=base.get("moment", zero), **point_loads)
-    else:
-        _known("[base] ", base, BASE)
-        act = _built(
-            "base", Actuation, tensions=base.get("tensions", np.zeros(robot.n_tendons)), insertion=base.get("insertion", 0.0)
-        )
-        load = _built("base", TipLoad, force=base.get("force", zero), moment=base.get("moment", zero))
+    _known("[base] ", base, BASE)
+    if "insertion" in base and "insertions" in base:
+        raise ValueError("[base] give insertion (the first and only tube) or insertions (one per tube), not both")
+    driven, n = base.get("driven", []), robot.n_tendons
+    if not (isinstance(driven, list) and all(i in range(1, n + 1) and not isinstance(i, bool) for i in driven)):
+        raise ValueError(f"[base] driven = {driven!r} must list tendons numbered 1 to {n} (1 for the first)")
+    act = _built(
+        "base",
+        Actuation,
+        tensions=base.get("tensions", np.zeros(robot.n_tendons)),
+        insertions=base.get("insertions", base.get("insertion", np.zeros(robot.n_tubes))),
+        displacements=base.get("displacements", np.zeros(len(driven))),
+        driven=tuple(i - 1 for i in driven),
+    )
+    point_loads = {k: base[k] for k in ("point_s", "point_force", "point_moment") if k in base}
+    load = _built("base", Loads, tip_force=base.get("force", zero), tip_moment=base.get("moment", zero), **point_loads)
     solver = _table(data, "solver")
     _known("[solver] ", solver, [f.name for f in dataclasses.fields(SolverOptions)])
     args = dict(robot=robot, act=act, load=load, solver=_built("solver", SolverOptions, **solver))
-    if isinstance(robot, Robot):  # counts and ranges that need the robot and the base together
-        _built("base", general.check_arguments, robot=robot, act=act, load=load, solver=args["solver"])
+    _built("base", rod.check_arguments, robot=robot, act=act, load=load, solver=args["solver"])  # counts, ranges
     tables = [name for name in ("grid", "batch") if name in data]
     if len(tables) != 1:
         found = "both" if tables else "neither"
@@ -148,8 +156,7 @@ def _arguments(data: dict, folder: Path) -> dict:
         force=(base.get("force", zero), COMPONENTS),
         moment=(base.get("moment", zero), COMPONENTS),
     )
-    if isinstance(robot, Robot):
-        defaults["displacements"] = (act.displacements, tuple(i + 1 for i in act.driven))
+    defaults["displacements"] = (act.displacements, tuple(i + 1 for i in act.driven))
     args[kind] = {name: _values(f"{kind}.{name}", v, *defaults.get(name, (None, None))) for name, v in columns.items()}
     _built(kind, lambda: check_points(robot, act, load, args.get("grid"), args.get("batch")))  # values, host memory
     for name in ("shapes", "compliance", "warm_start"):

@@ -1,12 +1,11 @@
 """Sweeps: many solves over a grid or batch of inputs, run by the batch engine.
 
 A sweep varies named inputs around a base configuration: the actuation ("tensions" [N],
-"insertion" [m]), the tip load ("force" [N], "moment" [N m], "tip_mass" [kg], whose weight adds
-to the force) and any scalar Robot field ("E_silicone" [Pa], "tendon_offset" [m], ...). A
-``Robot`` names "tensions", "insertions" (one per tube) and "displacements" (one per
-displacement-driven tendon of the base Actuation), the tip "force", "moment" and
-"tip_mass", the base Loads' "point_force" and "point_moment", and its fields by name
-(fields.py: "sections[*].E", "tendons[3].offset", ...). A
+"insertions" [m], one per tube, or "insertion" for a robot with one tube, "displacements" [m],
+one per displacement-driven tendon of the base Actuation), the loads (tip "force" [N], "moment"
+[N m], "tip_mass" [kg], whose weight adds to the force, the base Loads' "point_force" and
+"point_moment") and the robot's fields by name (fields.py: "sections[*].E" [Pa],
+"tendons[3].offset" [m], ...). A
 ``grid`` takes the product of axes; a ``batch`` zips columns of equal length. Results come back
 whole (``sweep``), chunk by chunk (``sweep_chunks``), or streamed to an .npz file (``sweep(out=)``,
 one part per process after ``jax.distributed.initialize``, read back by ``tdct.gather``).
@@ -29,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from . import __version__, fields, general, status
+from . import fields, status
 from .batch import Kernel, batch_solver, chunk_lanes, iter_batched, joined, mesh_for
 from .checkpoint import Partial, complete, digest
 from .checks import as_array, check_output, check_range
@@ -40,6 +39,7 @@ from .options import DEFAULT_SOLVER, SolverOptions
 from .results import SweepChunk, SweepResult, part_path
 from .shooting import RootInfo, compliance_at, force_scale, quick_root, unscaled
 from .solve import problem, solution_at, solve, tip_angle
+from .version import __version__
 
 INPUTS = ("tensions", "insertions", "insertion", "displacements", "force", "moment", "tip_mass", "point_force", "point_moment")
 """A sweep's input names besides the robot's fields ("insertion": the one tube's depth of a robot with one)."""
@@ -508,9 +508,9 @@ def sweep_chunks(robot=None, act=None, load=None, **options) -> Iterator[SweepCh
 
 
 def sweep(
-    robot: Robot | Robot | None = None,
-    act: Actuation | Actuation | None = None,
-    load: TipLoad | Loads | None = None,
+    robot: Robot | None = None,
+    act: Actuation | None = None,
+    load: Loads | None = None,
     *,
     grid: Mapping | None = None,
     batch: Mapping | None = None,
@@ -530,21 +530,21 @@ def sweep(
     """Solves many configurations at once: ``jax.vmap`` of ``tdct.solve`` in bounded chunks.
 
     Args:
-        robot, act, load: the base configuration (defaults: Robot(), no tension, no tube, no tip
-            load). A Robot takes a Actuation (default: no tension, tubes at 0) and
-            Loads (default: none), or an Actuation and a TipLoad.
+        robot, act, load: the base configuration (defaults: ``Robot.paper()``, no tension, tubes
+            withdrawn, no load).
         grid: {name: values}: every combination of the axes, first axis slowest. Values have a
-            leading axis of points: "tensions" (k, n_tendons) [N], "insertion" (k,) [m], "force"
-            and "moment" (k, 3) [N], [N m], "tip_mass" (k,) [kg] (weight added to the force),
-            or any scalar Robot field (k,). For a Robot "insertions" (k, n_tubes) [m],
-            "displacements" (k, len(act.driven)) [m], "point_force" and "point_moment" (k, n, 3)
-            (the base Loads' n point loads) instead of "insertion", and its fields by name
-            (``tdct_jax.fields``: "sections[*].E" (k,) [Pa], "tendons[3].offset" (k,) [m], ...);
-            the result's ``tensions`` holds each point's tendon tensions.
+            leading axis of points: "tensions" (k, n_tendons) [N], "insertions" (k, n_tubes)
+            [m] ("insertion" (k,) for a robot with one tube), "displacements" (k,
+            len(act.driven)) [m], "force" and "moment" (k, 3) [N], [N m], "tip_mass" (k,) [kg]
+            (weight added to the force), "point_force" and "point_moment" (k, n, 3) (the base
+            Loads' n point loads), and the robot's fields by name (``tdct_jax.fields``:
+            "sections[*].E" (k,) [Pa], "tendons[3].offset" (k,) [m], ...); the result's
+            ``tensions`` holds each point's tendon tensions.
         batch: {name: values} with the same leading length, zipped point by point.
         warm_start: (grid only) solve along the last axis in order, each solve started from its
             neighbour's base wrench; the other axes run in parallel.
-        shapes: also return the full shape of every solution (memory: 2 steps + 1 nodes each).
+        shapes: also return the full shape of every solution (memory: steps + 1 nodes per
+            breakpoint interval each).
         compliance: also return the exact 3x3 tip compliance (eq. 41) at every point.
         chunk_size: configurations per compiled call; bounds device memory. None takes the
             default of the devices' platform per device (``tdct_jax.batch.CHUNK_SIZES``) times
@@ -570,9 +570,7 @@ def sweep(
         throw: after the sweep (and after writing ``out``), raise ConvergenceError naming the
             first failed point and the number of failures, if any point failed (default, as for
             every entry point). With False, failures stay in ``result`` (per point) and ``n_failed``.
-        scene: obstacles (as for ``tdct.solve``), the same for every point. A Robot is then solved
-            as its ``to_general()``, so the grid takes the general names ("insertions", (k, 1)).
-            To vary an obstacle, vmap ``tdct.solve`` over its numbers (docs/contact.md).
+        scene: obstacles (as for ``tdct.solve``), the same for every point. To vary an obstacle, vmap ``tdct.solve`` over its numbers (docs/contact.md).
 
     Returns:
         SweepResult, or with ``out`` the path written.

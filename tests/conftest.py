@@ -7,6 +7,7 @@ import sys
 import tempfile
 import threading
 from pathlib import Path
+from typing import NamedTuple
 
 import jax
 import jax.monitoring
@@ -144,6 +145,36 @@ def _drop_compiled_programs_when_maps_run_high():
         gc.collect()
 
 
+class Section(NamedTuple):
+    """Section properties of a one-section robot with one tube (the paper's), by the textbook
+    formulas: E, G, area A, second moments I_x, I_y of the silicone; EI and rho A of the tube."""
+
+    E: float
+    G: float
+    A: float
+    I_x: float
+    I_y: float
+    EI_tube: float
+    rho: float
+    rho_tube: float
+
+
+def section(robot) -> Section:
+    sec, tube, n = robot.sections[0], robot.tubes[0], robot.n_tendons
+    D, dc, dt = float(sec.outer_diameter), float(sec.inner_diameter), float(sec.tendon_channel_diameter)
+    r = np.array([[float(t.offset) * np.cos(float(t.angle)), float(t.offset) * np.sin(float(t.angle))] for t in robot.tendons])
+    A = np.pi / 4 * (D**2 - dc**2 - n * dt**2)
+    disc, own, hole = np.pi / 64 * (D**4 - dc**4), np.pi / 64 * dt**4, np.pi / 4 * dt**2
+    I_x = disc - np.sum(own + hole * r[:, 1] ** 2)
+    I_y = disc - np.sum(own + hole * r[:, 0] ** 2)
+    Do, Di = float(tube.outer_diameter), float(tube.inner_diameter)
+    E = float(sec.E)
+    G = E / (2 * (1 + float(sec.nu)))
+    tube_area = np.pi / 4 * (Do**2 - Di**2)
+    EI_tube = float(tube.E) * np.pi / 64 * (Do**4 - Di**4)
+    return Section(E, G, A, I_x, I_y, EI_tube, float(sec.density) * A, float(tube.density) * tube_area)
+
+
 def rel_err(a, b):
     """Largest relative deviation of a from the reference b."""
     a, b = np.asarray(a, float), np.asarray(b, float)
@@ -152,7 +183,7 @@ def rel_err(a, b):
 
 @pytest.fixture(scope="session")
 def robot():
-    return tdct.Robot()
+    return tdct.Robot.paper()
 
 
 HEIGHT, MASS = 0.03, 0.02
@@ -166,15 +197,15 @@ def stiffest(robot):
     scope: its program takes tens of seconds to compile, and module fixtures are rebuilt whenever a
     worker comes back to their module)."""
     target = tdct.Target((0.0, HEIGHT, 0.0), axes="y")
-    options = dict(load=tdct.TipLoad.from_mass(MASS), tendons=(1,), objective=tdct.Stiffness(direction=(0.0, -1.0, 0.0)))
+    options = dict(load=tdct.Loads.from_mass(MASS), tendons=(1,), objective=tdct.Stiffness(direction=(0.0, -1.0, 0.0)))
     return tdct.inverse_kinematics(robot, target, **options)
 
 
 @pytest.fixture(scope="session")
 def paper_case(robot):
     """The paper's Fig. 6 setting: 6 N on tendon 1, 80 mm of tube, 20 g at the tip."""
-    act = tdct.Actuation(tensions=(6.0, 0.0, 0.0, 0.0), insertion=0.08)
-    load = tdct.TipLoad.from_mass(0.020)
+    act = tdct.Actuation(tensions=(6.0, 0.0, 0.0, 0.0), insertions=0.08)
+    load = tdct.Loads.from_mass(0.020)
     return robot, act, load, tdct.solve(robot, act, load, throw=True)
 
 

@@ -58,7 +58,7 @@ def test_robot_file_changes_the_answer(tmp_path, capsys, paper_case):
         == 0
     )
     out = json.loads(capsys.readouterr().out)
-    ref = tdct.solve(tdct.Robot(E_silicone=1.7e6), paper_case[1], paper_case[2])
+    ref = tdct.solve(tdct.Robot.paper(E_silicone=1.7e6), paper_case[1], paper_case[2])
     np.testing.assert_allclose(out["tip_position_mm"], np.asarray(ref.tip_position) * 1e3, rtol=1e-12)
 
 
@@ -77,7 +77,7 @@ def test_compliance_verb_matches_the_api(capsys, tmp_path, robot):
     ]
     assert main(args) == 0
     out = json.loads(capsys.readouterr().out)
-    act, load = tdct.Actuation((8.0, 0, 0, 0), 0.05), tdct.TipLoad(force=(0.05, -0.3, 0.02))
+    act, load = tdct.Actuation((8.0, 0, 0, 0), 0.05), tdct.Loads(tip_force=(0.05, -0.3, 0.02))
     CM = np.asarray(tdct.compliance(robot, act, load))
     np.testing.assert_allclose(out["compliance_mm_per_N"], CM * 1e3, rtol=1e-12)
     np.testing.assert_allclose(out["semi_axes_mm_per_N"], np.linalg.svd(CM, compute_uv=False) * 1e3, rtol=1e-10)
@@ -122,7 +122,8 @@ def test_cli_compile_cache_is_on_by_default_and_sweeps_get_every_core(tmp_path, 
         (["solve", "--insertion-mm", "-1e-3"], "--insertion-mm -0.001 is outside the allowed range [0, 160] mm"),
         (["solve", "--tip-mass-g", "-3"], "--tip-mass-g -3 is outside the allowed range [0, inf] g"),
         (["compliance", "--max-iter", "0"], "--max-iter 0 is outside the allowed range [1, inf]"),
-        (["solve", "--set", "E_silicone=-3"], "--set: E_silicone = -3 is outside the allowed range (0, inf] Pa"),
+        (["solve", "--set", "sections[*].E=-3"], "--set: sections[0].E = -3 is outside the allowed range (0, inf] Pa"),
+        (["solve", "--set", "E_silicone=-3"], "--set: sections[0].E = -3 is outside the allowed range (0, inf]"),
         (["synth", "--out", "x", "--tensions", "2,-1,0,0"], "--tensions 2,-1,0,0 (value 2: -1) is outside"),
         (
             ["synth", "--out", "x", "--preset", "paper", "--noise-mm", "-0.1"],
@@ -143,7 +144,7 @@ def test_negative_values_are_read_as_typed(capsys, robot):
     args = ["solve", "--tensions", "6,0,0,0", "--tip-force", "-0.15,0,-0.05", "--tip-moment", "-1e-3,0,0", "--json"]
     assert main(args) == 0
     out = json.loads(capsys.readouterr().out)
-    load = tdct.TipLoad(force=(-0.15, 0.0, -0.05), moment=(-1e-3, 0.0, 0.0))
+    load = tdct.Loads(tip_force=(-0.15, 0.0, -0.05), tip_moment=(-1e-3, 0.0, 0.0))
     ref = tdct.solve(robot, tdct.Actuation((6.0, 0, 0, 0)), load)
     np.testing.assert_allclose(out["tip_position_mm"], np.asarray(ref.tip_position) * 1e3, rtol=1e-12)
 

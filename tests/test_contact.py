@@ -13,7 +13,7 @@ import pytest
 
 import tdct_jax as tdct
 from tdct_jax import status
-from tdct_jax.solve import GeneralSolution, solution_and_compliance, solve_arguments
+from tdct_jax.solve import Solution, solution_and_compliance, solve_arguments
 
 L, D, E, NU = 0.3, 2e-3, 1e9, 0.3
 r = D / 2
@@ -27,7 +27,7 @@ def beam(tendon=False):
     """A weightless uniform rod along +z; with ``tendon``, one tendon at body +y to the tip."""
     section = tdct.Section(end=L, outer_diameter=D, E=E, nu=NU, density=0.0)
     tendons = (tdct.Tendon(offset=5e-3, angle=np.pi / 2),) if tendon else ()
-    return tdct.GeneralRobot(L, (section,), tendons)
+    return tdct.Robot(L, (section,), tendons)
 
 
 # ---- acceptance 1: small-deflection closed forms ----------------------------------------------------
@@ -138,7 +138,7 @@ def scene_of(point, normal, centre, radius):
 
 
 def _solve_one(obstacle):
-    act = tdct.GeneralActuation([TENSION])
+    act = tdct.Actuation([TENSION])
     return tdct.solve(beam(True), act, tdct.Loads(jnp.asarray(TIP_FORCE)), gravity=ZERO_G, scene=scene_of(*obstacle), throw=False)
 
 
@@ -213,7 +213,7 @@ FD_RTOL = 1e-5
 
 def tip_in_contact(tension, centre, tip_force):
     scene = tdct.Scene((tdct.Sphere(centre, SPHERE_R),), every=2)
-    act = tdct.GeneralActuation(jnp.reshape(tension, (1,)))
+    act = tdct.Actuation(jnp.reshape(tension, (1,)))
     return tdct.solve(beam(True), act, tdct.Loads(tip_force), gravity=ZERO_G, scene=scene, solver=TIGHT).tip_position
 
 
@@ -223,7 +223,7 @@ def contact_point():
     # Newton loop and its path evaluation different round-off (1e-10 in the contact rows)
     args = tuple(jnp.asarray(x, jnp.float64) for x in (TENSION, SPHERE_C, TIP_FORCE))
     sol = tdct.solve(
-        beam(True), tdct.GeneralActuation([TENSION]), tdct.Loads(args[2]), gravity=ZERO_G,
+        beam(True), tdct.Actuation([TENSION]), tdct.Loads(args[2]), gravity=ZERO_G,
         scene=tdct.Scene((tdct.Sphere(SPHERE_C, SPHERE_R),), every=2), solver=TIGHT,
     )  # fmt: skip
     return args, sol
@@ -261,16 +261,14 @@ def test_derivatives_through_contact_match_central_differences(contact_point):
 def test_compliance_in_contact_matches_central_differences(contact_point):
     args, _ = contact_point
     scene = tdct.Scene((tdct.Sphere(SPHERE_C, SPHERE_R),), every=2)
-    C = tdct.compliance(
-        beam(True), tdct.GeneralActuation([TENSION]), tdct.Loads(args[2]), gravity=ZERO_G, scene=scene, solver=TIGHT
-    )
+    C = tdct.compliance(beam(True), tdct.Actuation([TENSION]), tdct.Loads(args[2]), gravity=ZERO_G, scene=scene, solver=TIGHT)
     tip = jax.jit(tip_in_contact)
     h = H[2]
     fd = np.stack(
         [(tip(args[0], args[1], args[2] + e) - tip(args[0], args[1], args[2] - e)) / (2 * h) for e in h * np.eye(3)], -1
     )
     np.testing.assert_allclose(C, fd, rtol=0, atol=FD_RTOL * np.max(np.abs(fd)))
-    free = tdct.compliance(beam(True), tdct.GeneralActuation([TENSION]), tdct.Loads(args[2]), gravity=ZERO_G, solver=TIGHT)
+    free = tdct.compliance(beam(True), tdct.Actuation([TENSION]), tdct.Loads(args[2]), gravity=ZERO_G, solver=TIGHT)
     assert np.linalg.norm(C) < np.linalg.norm(free)  # the obstacle stiffens the tip
 
 
@@ -290,11 +288,11 @@ def test_multiple_shooting_with_a_scene_is_refused():
 
 
 def test_a_far_scene_gives_the_contact_free_solve():
-    act = tdct.GeneralActuation([TENSION])
+    act = tdct.Actuation([TENSION])
     free = tdct.solve(beam(True), act, None, gravity=ZERO_G)
     far = tdct.Scene((tdct.Plane((0.0, -1.0, 0.0), (0.0, 1.0, 0.0)), tdct.Sphere((0.0, 0.0, 2.0), 0.1)), every=4)
     sol = tdct.solve(beam(True), act, None, gravity=ZERO_G, scene=far)
-    assert isinstance(sol, GeneralSolution) and free.contact is None
+    assert isinstance(sol, Solution) and free.contact is None
     np.testing.assert_allclose(sol.tip_position, free.tip_position, rtol=0, atol=1e-12)
     assert not np.any(sol.contact.active) and np.all(sol.contact.force == 0)
     assert sol.contact.force.shape == (20 // 4, 2)
@@ -304,7 +302,7 @@ def test_the_contact_passes_share_one_copy_of_the_integration():
     """Plain Newton, the smoothed solves and the exact one are passes of one loop (``shooting._contact_root``):
     the contact solve's program is the contact-free one's and a little more, not one shooting
     integration per pass (before: 39 while loops against 16, 2.6 times the lines)."""
-    act = tdct.GeneralActuation([TENSION])
+    act = tdct.Actuation([TENSION])
     far = tdct.Scene((tdct.Plane((0.0, -1.0, 0.0), (0.0, 1.0, 0.0)), tdct.Sphere((0.0, 0.0, 2.0), 0.1)), every=4)
     free, touching = (
         solution_and_compliance.lower(

@@ -14,7 +14,8 @@ import pytest
 import tdct_jax as tdct
 from tdct_jax import cli, plotting
 from tdct_jax.cli import main
-from tdct_jax.loads import STANDARD_GRAVITY
+from tdct_jax.description import section_area
+from tdct_jax.inputs import STANDARD_GRAVITY
 from tdct_jax.scene import SCENES
 
 matplotlib.use("Agg")
@@ -29,7 +30,7 @@ BALANCE_ATOL = 1e-9  # N
 @pytest.fixture(scope="module")
 def on_the_table():
     """The API's solve of the inputs SOLVE types."""
-    return tdct.solve(tdct.Robot(), tdct.Actuation([0.0, 0.0, 10.0, 0.0], 0.06), scene=tdct.read_scene(TABLE))
+    return tdct.solve(tdct.Robot.paper(), tdct.Actuation([0.0, 0.0, 10.0, 0.0], 0.06), scene=tdct.read_scene(TABLE))
 
 
 def test_json_lists_the_contacts_and_the_wrench_on_each_obstacle(capsys, on_the_table):
@@ -51,8 +52,9 @@ def test_json_lists_the_contacts_and_the_wrench_on_each_obstacle(capsys, on_the_
     pushed = sum(x["force_N"] * np.asarray(x["normal"]) for x in out["contacts"])
     on_obstacles = sum(np.asarray(w["force_N"]) for w in out["obstacles"])
     np.testing.assert_allclose(on_obstacles, -pushed, rtol=0, atol=BALANCE_ATOL)
-    robot = tdct.Robot()
-    mass = robot.linear_density(False) * robot.length + robot.tube_linear_density * 0.06
+    robot = tdct.Robot.paper()
+    (section,), (tube,) = robot.sections, robot.tubes  # the body with its four tendon channels, the tube to 60 mm
+    mass = section.density * section_area(section, robot.n_tendons) * robot.length + tube.density * tube.area * 0.06
     np.testing.assert_allclose(
         np.asarray(sol.total_force)[0], mass * np.asarray(STANDARD_GRAVITY) + pushed, rtol=0, atol=BALANCE_ATOL
     )
@@ -104,7 +106,7 @@ def test_bad_scene_file_exits_2_naming_the_obstacle_and_field(scene, words, tmp_
 def test_plot_draws_planes_spheres_capsules_and_contact_forces():
     """A straight shape drawn without a solve, touching a sphere at mid-length and a plane at the
     tip: each obstacle appears in the views that can show it, each contact force as an arrow."""
-    robot = tdct.GeneralRobot(0.2, (tdct.Section(end=0.2, outer_diameter=0.02, E=1e6, nu=0.5, density=1e3),))
+    robot = tdct.Robot(0.2, (tdct.Section(end=0.2, outer_diameter=0.02, E=1e6, nu=0.5, density=1e3),))
     scene = tdct.Scene(
         (
             tdct.Plane((0.0, 0.0, 0.21), (0.0, 0.0, -1.0), name="wall"),

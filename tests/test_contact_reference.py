@@ -112,7 +112,7 @@ def resting_on_the_table(g, depth=TABLE_DEPTH):
 
 def robot():
     section = tdct.Section(end=LENGTH, outer_diameter=DIAMETER, E=MODULUS, nu=POISSON, density=DENSITY)
-    return tdct.GeneralRobot(LENGTH, (section,), (tdct.Tendon(offset=OFFSET, angle=1.5 * np.pi),))
+    return tdct.Robot(LENGTH, (section,), (tdct.Tendon(offset=OFFSET, angle=1.5 * np.pi),))
 
 
 def table(depth=TABLE_DEPTH):
@@ -121,16 +121,12 @@ def table(depth=TABLE_DEPTH):
 
 def on_the_table(g, depth=TABLE_DEPTH):
     solver = tdct.SolverOptions(steps=STEPS)
-    return tdct.solve(
-        robot(), tdct.GeneralActuation([TENSION]), tdct.Loads(), scene=table(depth), gravity=(0.0, g, 0.0), solver=solver
-    )
+    return tdct.solve(robot(), tdct.Actuation([TENSION]), tdct.Loads(), scene=table(depth), gravity=(0.0, g, 0.0), solver=solver)
 
 
 def contact_free(tip_force, g, steps=STEPS):
     load = tdct.Loads(tip_force=[0.0, tip_force, 0.0])
-    return tdct.solve(
-        robot(), tdct.GeneralActuation([TENSION]), load, gravity=(0.0, g, 0.0), solver=tdct.SolverOptions(steps=steps)
-    )
+    return tdct.solve(robot(), tdct.Actuation([TENSION]), load, gravity=(0.0, g, 0.0), solver=tdct.SolverOptions(steps=steps))
 
 
 def positions(shape, s):

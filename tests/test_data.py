@@ -81,7 +81,7 @@ def test_defaults_comments_and_extra_columns(tmp_path):
     assert exp.name == "run 7"
     np.testing.assert_allclose(exp.act.tensions, [1, 2, 0, 0])
     assert float(exp.act.insertion) == 0 and float(exp.tip_mass) == 0
-    np.testing.assert_allclose(exp.load.force, 0.0)
+    np.testing.assert_allclose(exp.load.tip_force, 0.0)
     np.testing.assert_allclose(exp.position[1], [0.0005, 0.0, 0.020])
 
 
@@ -91,7 +91,7 @@ def test_round_trip(tmp_path):
         s=s,
         position=position,
         act=tdct.Actuation((6.0, 0.25, 0.0, 1.5), 0.0437),
-        load=tdct.TipLoad(force=(0.01, -0.2, 0.03), moment=(1e-3, 0.0, -2.5e-4)),
+        load=tdct.Loads(tip_force=(0.01, -0.2, 0.03), tip_moment=(1e-3, 0.0, -2.5e-4)),
         tip_mass=0.0123,
         name="helix t1 6N",
     )
@@ -189,7 +189,7 @@ def test_bad_header(tmp_path, old, new, line, words):
 
 
 def test_tension_count_follows_the_robot(tmp_path):
-    three = tdct.Robot(tendon_angles=(0.0, 2.0, 4.0))
+    three = tdct.Robot.paper(tendon_angles=(0.0, 2.0, 4.0))
     expect_error(shape_file(tmp_path), 3, ["has 4 value(s), expected 3", "3 tendons"], robot=three)
     exp = data.read_experiment(shape_file(tmp_path, "6, 0, 0, 0", "6, 0, 0"), three)
     assert exp.act.tensions.shape == (3,)
@@ -216,7 +216,7 @@ def test_units_out_of_range(tmp_path, old, new, line, words):
 def test_length_slack_and_robot(tmp_path):
     path = shape_file(tmp_path, "10,0,-0.4,10", "164,0,-0.4,164")  # within 160 mm + 2% + 1 mm
     assert data.read_experiment(path).n_points == 3
-    expect_error(path, 9, ["robot length 100 mm"], robot=tdct.Robot(length=0.1))
+    expect_error(path, 9, ["robot length 100 mm"], robot=tdct.Robot.paper(length=0.1))
 
 
 def test_read_experiments(tmp_path):
@@ -239,16 +239,16 @@ def test_stack_pads_and_vmaps():
     s3, p3 = helix(3)
     s5, p5 = helix(5, 0.1)
     short = data.Experiment(s3, p3, tdct.Actuation((1.0, 0, 0, 0), 0.01), tip_mass=0.02, name="short")
-    long = data.Experiment(s5, p5, tdct.Actuation((2.0, 0, 0, 0), 0.02), tdct.TipLoad(force=(0.1, 0, 0)), name="long")
+    long = data.Experiment(s5, p5, tdct.Actuation((2.0, 0, 0, 0), 0.02), tdct.Loads(tip_force=(0.1, 0, 0)), name="long")
     st = data.stack([short, long])
     assert st.s.shape == (2, 5) and st.position.shape == (2, 5, 3) and st.weight.shape == (2, 5)
     assert st.act.tensions.shape == (2, 4) and st.tip_mass.shape == (2,) and st.name == ""
     np.testing.assert_array_equal(st.weight, [[1, 1, 1, 0, 0], [1, 1, 1, 1, 1]])
     np.testing.assert_array_equal(st.s[0], [*s3, s3[-1], s3[-1]])
     np.testing.assert_array_equal(st.position[0, 3:], [p3[-1], p3[-1]])
-    force = jax.vmap(lambda e: e.tip_load().force)(st)
+    force = jax.vmap(lambda e: e.tip_load().tip_force)(st)
     np.testing.assert_allclose(force, [[0, -0.02 * 9.81, 0], [0.1, 0, 0]], rtol=1e-12, atol=1e-15)
-    np.testing.assert_allclose(st.tip_load().force, force)
+    np.testing.assert_allclose(st.tip_load().tip_force, force)
     # one padded experiment taken back out of the stack passes the checks (repeats have weight 0)
     first = jax.tree_util.tree_map(lambda x: x[0], st)
     assert first.n_points == 5 and float(first.tip_mass) == 0.02
@@ -266,12 +266,12 @@ def test_stack_refuses_different_tendon_counts():
 
 def test_experiment_is_a_pytree_and_tip_load_adds_the_weight():
     s, p = helix(6)
-    exp = data.Experiment(s, p, tdct.Actuation((3.0, 0, 0, 0), 0.05), tdct.TipLoad(force=(0.1, 0, 0)), tip_mass=0.02)
+    exp = data.Experiment(s, p, tdct.Actuation((3.0, 0, 0, 0), 0.05), tdct.Loads(tip_force=(0.1, 0, 0)), tip_mass=0.02)
     np.testing.assert_allclose(jax.jit(lambda e: e.position.sum())(exp), p.sum())
-    np.testing.assert_allclose(jax.jit(lambda e: e.tip_load().force)(exp), [0.1, -0.02 * 9.81, 0.0])
-    np.testing.assert_allclose(exp.tip_load(gravity=(0.0, 0.0, -10.0)).force, [0.1, 0.0, -0.2])
-    np.testing.assert_allclose(exp.tip_load(gravity=None).force, [0.1, 0.0, 0.0])
-    np.testing.assert_allclose(jax.grad(lambda m: dataclasses.replace(exp, tip_mass=m).tip_load().force[1])(0.02), -9.81)
+    np.testing.assert_allclose(jax.jit(lambda e: e.tip_load().tip_force)(exp), [0.1, -0.02 * 9.81, 0.0])
+    np.testing.assert_allclose(exp.tip_load(gravity=(0.0, 0.0, -10.0)).tip_force, [0.1, 0.0, -0.2])
+    np.testing.assert_allclose(exp.tip_load(gravity=None).tip_force, [0.1, 0.0, 0.0])
+    np.testing.assert_allclose(jax.grad(lambda m: dataclasses.replace(exp, tip_mass=m).tip_load().tip_force[1])(0.02), -9.81)
     np.testing.assert_allclose(exp.weight, np.ones(6))
 
 
@@ -295,3 +295,65 @@ def test_bad_experiment(change, words):
         data.Experiment(**fields)
     for w in words:
         assert w in str(e.value), str(e.value)
+
+
+def test_writing_the_documented_example_back_gives_its_bytes(tmp_path):
+    # the file format is unchanged: a read shape file written back is byte for byte the same
+    path = tmp_path / "example.csv"
+    path.write_text(data.FORMAT)
+    exp = data.read_experiment(path)
+    assert isinstance(exp.act, tdct.Actuation) and isinstance(exp.load, tdct.Loads)
+    assert exp.act.insertions.shape == (1,) and exp.load.n_points == 0
+    assert data.write_experiment(tmp_path / "again.csv", exp).read_text() == data.FORMAT
+
+
+def test_a_robot_without_a_tube_reads_and_writes_shape_files(tmp_path):
+    robot = dataclasses.replace(tdct.Robot.paper(), tubes=())
+    exp = data.read_experiment(shape_file(tmp_path, "# insertion_mm: 80\n", ""), robot)
+    assert exp.act.insertions.shape == (0,)
+    written = data.write_experiment(tmp_path / "back.csv", exp)
+    assert "# insertion_mm: 0\n" in written.read_text()
+    assert_same(data.read_experiment(written, robot), exp)
+    expect_error(shape_file(tmp_path), 4, ["insertion_mm = 80", "no tube"], robot=robot)
+    two = tdct.Robot.from_toml("tdct_jax/robots/two_segment.toml")
+    six = data.read_experiment(shape_file(tmp_path, "6, 0, 0, 0\n# insertion_mm: 80", "6, 0, 0, 0, 0, 0"), two)
+    assert six.act.tensions.shape == (6,) and six.act.insertions.shape == (0,)
+    tube = tdct.Robot.paper().tubes[0]
+    inner = dataclasses.replace(tube, outer_diameter=0.001, inner_diameter=0.0005)
+    many = dataclasses.replace(tdct.Robot.paper(), tubes=(tube, inner))
+    expect_error(shape_file(tmp_path), 0, ["2 tubes", "one tube's insertion"], robot=many)
+
+
+def test_writer_refuses_actuations_and_loads_beyond_the_format(tmp_path):
+    s, position = helix(5)
+    cases = [
+        (tdct.Actuation((0.0, 0, 0, 0), driven=(1,), displacements=(1e-3,)), tdct.Loads(), "displacement-driven"),
+        (tdct.Actuation((1.0, 0, 0, 0), (0.01, 0.02)), tdct.Loads(), "2 tube insertions"),
+        (tdct.Actuation((1.0, 0, 0, 0), 0.01), tdct.Loads(point_s=(0.05,), point_force=((0, 0.1, 0),)), "1 point load"),
+        (tdct.Actuation((1.0, 0, 0, 0), 0.01), tdct.Loads(distributed_force=(0, 1.0, 0)), "distributed force"),
+    ]
+    for act, load, words in cases:
+        with pytest.raises(ValueError, match=words):
+            data.write_experiment(tmp_path / "x.csv", data.Experiment(s, position, act, load))
+
+
+def test_stack_holds_actuations_and_loads_with_batch_axes():
+    s, p = helix(4)
+    point = tdct.Loads(point_s=(0.05,), point_force=((0, 0.1, 0),))
+    a = data.Experiment(s, p, tdct.Actuation((1.0, 0, 0, 0), 0.01), point, name="a")
+    b = data.Experiment(s, p, tdct.Actuation((2.0, 0, 0, 0), 0.02), dataclasses.replace(point, point_s=(0.07,)), name="b")
+    st = data.stack([a, b])
+    assert st.act.tensions.shape == (2, 4) and st.act.insertions.shape == (2, 1)
+    assert st.load.point_s.shape == (2, 1) and st.load.point_force.shape == (2, 1, 3) and st.load.tip_force.shape == (2, 3)
+    np.testing.assert_array_equal(st.act.insertion, [0.01, 0.02])
+    # a stacked Actuation and Loads built by hand (leading batch axes) make a stacked Experiment too
+    by_hand = data.Experiment(
+        np.stack([s, s]), np.stack([p, p]), tdct.Actuation(st.act.tensions, st.act.insertions), tdct.Loads.from_mass([0.0, 0.01])
+    )
+    assert by_hand.tip_mass.shape == (2,) and by_hand.tip_load().tip_force.shape == (2, 3)
+    with pytest.raises(ValueError, match="different numbers of point loads"):
+        data.stack([a, data.Experiment(s, p, tdct.Actuation((1.0, 0, 0, 0), 0.01), name="c")])
+    with pytest.raises(ValueError, match="different numbers of tube insertions"):
+        data.stack([a, data.Experiment(s, p, tdct.Actuation((1.0, 0, 0, 0)), point, name="d")])
+    with pytest.raises(ValueError, match="same driven"):
+        data.stack([a, data.Experiment(s, p, tdct.Actuation((1.0, 0, 0, 0), 0.01, (1e-3,), (0,)), point, name="e")])

@@ -28,7 +28,7 @@ def envelope():
 @pytest.fixture(scope="module")
 def singles(robot, envelope):
     return [
-        tdct.solve(robot, tdct.Actuation(t, d), tdct.TipLoad.from_mass(m), throw=False)
+        tdct.solve(robot, tdct.Actuation(t, d), tdct.Loads.from_mass(m), throw=False)
         for t, d, m in zip(envelope["tensions"], envelope["insertion"], envelope["tip_mass"], strict=True)
     ]
 
@@ -74,7 +74,7 @@ def test_first_pass_shapes_and_compliance_match_the_full_solver(robot, envelope,
 
 
 def test_continuation_stages_are_solver_options(robot):
-    act, load = tdct.Actuation((6.0, 0, 0, 0), 0.08), tdct.TipLoad.from_mass(0.02)
+    act, load = tdct.Actuation((6.0, 0, 0, 0), 0.08), tdct.Loads.from_mass(0.02)
     one_ramp = tdct.solve(robot, act, load, solver=tdct.SolverOptions(tol=1e-18, stages=(1, 2)), throw=False)
     # every ramp tried, and failed: at a tolerance under round-off, the last Newton's stall or its
     # step limit comes first as the last bits of the residual fall

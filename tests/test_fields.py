@@ -22,14 +22,14 @@ def test_item_fields_by_position_and_shared(two):
     assert fields.value(changed, "sections[*].E") == 60e9
     assert fields.value(two, "tendons[1].angle") == pytest.approx(-0.5235987755982988)
     assert len(fields.names(two)) == 1 + 2 * 7 + 6 * 6
-    assert fields.names(tdct.Robot())[0] == "length" and fields.is_linear("tendons[0].angle")
+    assert fields.names(tdct.Robot.paper())[0] == "length" and fields.is_linear("tendons[0].angle")
     assert not fields.is_linear("sections[0].E")
 
 
 def test_traced_values_pass_through(two):
     E = jax.jit(lambda E: fields.replace(two, {"sections[*].E": E}).sections[1].E)(3.0)
     assert float(E) == 3.0
-    assert float(fields.replace(tdct.Robot(), {"E_silicone": 1e5}).E_silicone) == 1e5
+    assert float(fields.replace(tdct.Robot.paper(), {"sections[*].E": 1e5}).sections[0].E) == 1e5
 
 
 def test_a_range_shares_one_value_among_its_items(two):
@@ -48,9 +48,9 @@ def test_a_range_shares_one_value_among_its_items(two):
     "name, words",
     [
         ("sections[2].E", "2 sections (indices 0 to 1, or a range a-b with a <= b)"),
-        ("tendon[0].offset", "not a scalar GeneralRobot field"),
+        ("tendon[0].offset", "not a scalar robot field"),
         ("tendons[0].radius", "tendons[i, * or a-b].{offset, angle"),
-        ("E_silicone", "not a scalar GeneralRobot field"),
+        ("E_robot", "not a scalar robot field"),
     ],
 )
 def test_unknown_names_say_what_exists(two, name, words):
@@ -65,5 +65,13 @@ def test_bad_values_name_the_item(two):
         fields.value(two, "tendons[0].stiffness")
     with pytest.raises(ValueError, match="values differ"):
         fields.value(fields.replace(two, {"tendons[0].offset": 0.011}), "tendons[*].offset")
-    with pytest.raises(ValueError, match="not a scalar Robot field"):
-        fields.check(tdct.Robot(), "sections[0].E")
+    with pytest.raises(ValueError, match=re.escape("1 sections (indices 0 to 0")):
+        fields.check(tdct.Robot.paper(), "sections[1].E")
+
+
+def test_the_paper_robots_former_names_resolve_with_a_warning(two):
+    """ "E_silicone" and its kin name the one description's fields, on any robot, warning once."""
+    with pytest.warns(FutureWarning, match="'sections\\[\\*\\].E'"):
+        changed = fields.replace(two, {"E_silicone": 2e6})
+    assert [float(s.E) for s in changed.sections] == [2e6, 2e6]
+    assert fields.PAPER_NAMES["tendon_offset"] == "tendons[*].offset"

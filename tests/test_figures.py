@@ -123,3 +123,38 @@ def test_style_is_applied_while_drawing_and_left_behind():
     assert fig.axes[0].xaxis.label.get_fontsize() == plotting.STYLE["axes.labelsize"]
     assert [a.get_ylabel() for a in fig.axes] == [f"$\\lambda_{k}$ [mm/N]" for k in (1, 2, 3)]
     assert matplotlib.rcParams["font.size"] == before
+
+
+def test_plot_robot_draws_the_interval_layout_both_sides_of_each_breakpoint():
+    """Nodes interval by interval (the tube end and a section end are breakpoints, each node there
+    twice): the tube is shaded up to the left side of its end only, each node takes its own side's
+    section (the outline steps at a diameter change, nowhere pinched to the centreline), and the
+    tendon runs to its anchor."""
+    import tdct_jax as tdct
+
+    sections = (
+        tdct.Section(end=0.1, outer_diameter=0.02, E=1e6, nu=0.5, density=1e3, inner_diameter=2e-3),
+        tdct.Section(end=0.2, outer_diameter=0.01, E=1e6, nu=0.5, density=1e3, inner_diameter=2e-3),
+    )
+    tube = tdct.Tube(outer_diameter=1.5e-3, inner_diameter=1e-3, E=6e10, nu=0.3, density=6e3)
+    robot = tdct.Robot(0.2, sections, (tdct.Tendon(offset=4e-3, angle=0.0),), (tube,))
+    s = np.concatenate([np.linspace(0.0, 0.05, 6), np.linspace(0.05, 0.1, 6), np.linspace(0.1, 0.2, 11)])  # d = 50 mm
+    assert plotting._starts(s).tolist() == [True] + [False] * 5 + [True] + [False] * 5 + [True] + [False] * 10
+    np.testing.assert_array_equal(plotting._tube_mask(s, 0.05), np.arange(len(s)) <= 5)  # the left side of s = d
+    sol = SimpleNamespace(
+        s=s, position=np.outer(s, [0.0, 0.0, 1.0]), rotation=np.broadcast_to(np.eye(3), (len(s), 3, 3)), tip_angle=0.0
+    )
+    scene = tdct.Scene((tdct.Plane((0.0, -0.05, 0.0), (0.0, 1.0, 0.0), name="floor"),))
+    contact = SimpleNamespace(s=s[:1], position=np.zeros((1, 3)), force=np.zeros((1, 1)), normal=np.zeros((1, 1, 3)))
+    contact.active = contact.force > 0
+    sol.contact = contact
+    fig = plotting.plot_robot(sol, robot, tdct.Actuation((0.0,), 0.05), tdct.Loads(scene=scene))
+    side = fig.axes[0]
+    (tube_line,) = [line for line in side.get_lines() if "tube 1" in str(line.get_label())]
+    assert tube_line.get_xydata()[:, 0].max() == 50.0 and len(tube_line.get_xydata()) == 6
+    outline = [line.get_xydata() for line in side.get_lines() if line.get_color() == "0.25"]
+    assert len(outline) == 2
+    upper = outline[0] if outline[0][:, 1].max() > 0 else outline[1]
+    np.testing.assert_allclose(upper[:12, 1], 10.0)  # section 1 to its end, the left side of s = 100 mm
+    np.testing.assert_allclose(upper[12:, 1], 5.0)  # section 2 from the right side on
+    matplotlib.pyplot.close(fig)

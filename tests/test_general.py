@@ -36,8 +36,8 @@ def rel(a, b):
 
 
 def test_paper_file_is_the_paper_robot():
-    from_file, converted = tdct.Robot.from_toml(ROBOTS / "paper.toml"), tdct.Robot().to_general()
-    assert isinstance(from_file, tdct.GeneralRobot)
+    from_file, converted = tdct.Robot.from_toml(ROBOTS / "paper.toml"), tdct.Robot.paper()
+    assert isinstance(from_file, tdct.Robot)
     assert jax.tree.structure(from_file) == jax.tree.structure(converted)
     for a, b in zip(jax.tree.leaves(from_file), jax.tree.leaves(converted), strict=True):
         assert float(a) == pytest.approx(float(b), rel=1e-15)
@@ -124,13 +124,13 @@ def test_robot_file_errors_name_field_value_and_range(tmp_path, old, new, words)
 def test_inputs_are_checked_against_the_robot(tmp_path):
     robot = tdct.Robot.from_toml(write(tmp_path, VALID))
     with pytest.raises(ValueError, match="2 tendons"):
-        tdct.solve(robot, tdct.GeneralActuation([1.0, 2.0, 3.0], [0.1]))
+        tdct.solve(robot, tdct.Actuation([1.0, 2.0, 3.0], [0.1]))
     with pytest.raises(ValueError, match=r"tensions\[1\] = 12 .*max_tension"):
-        tdct.solve(robot, tdct.GeneralActuation([1.0, 12.0], [0.1]))
+        tdct.solve(robot, tdct.Actuation([1.0, 12.0], [0.1]))
     with pytest.raises(ValueError, match=r"point_s = \[0.5\] is outside"):
-        tdct.solve(robot, tdct.GeneralActuation([1.0, 2.0], [0.1]), tdct.Loads(point_s=[0.5], point_force=[[0, 0, 1.0]]))
+        tdct.solve(robot, tdct.Actuation([1.0, 2.0], [0.1]), tdct.Loads(point_s=[0.5], point_force=[[0, 0, 1.0]]))
     with pytest.raises(ValueError, match="insertions"):
-        tdct.solve(robot, tdct.GeneralActuation([1.0, 2.0], [0.5]))
+        tdct.solve(robot, tdct.Actuation([1.0, 2.0], [0.5]))
 
 
 # ---- (a) the paper's robot through the general path --------------------------------------------
@@ -140,14 +140,14 @@ PAPER_CASES = [((6.0, 0.0, 0.0, 1.0), 0.08, 0.02), ((3.0, 0.0, 0.0, 5.0), 0.0, 0
 
 @pytest.mark.parametrize("tensions, insertion, mass", PAPER_CASES)
 def test_paper_robot_through_the_general_path(tensions, insertion, mass):
-    act, load = tdct.Actuation(tensions, insertion), tdct.TipLoad.from_mass(mass)
+    act, load = tdct.Actuation(tensions, insertion), tdct.Loads.from_mass(mass)
     # one compiled program per robot: the Solution and the 6x6 compliance from the same solve
-    C_ref, reference = compliance_and_solution(tdct.Robot(), act, load)
+    C_ref, reference = compliance_and_solution(tdct.Robot.paper(), act, load)
     C_gen, general = compliance_and_solution(tdct.Robot.from_toml(ROBOTS / "paper.toml"), act, load)
-    assert rel(general.tip_position, reference.tip_position) < PAPER_TIP_RTOL
-    assert rel(general.tip_rotation, reference.tip_rotation) < PAPER_TIP_RTOL
+    assert rel(rod.tip_position, reference.tip_position) < PAPER_TIP_RTOL
+    assert rel(rod.tip_rotation, reference.tip_rotation) < PAPER_TIP_RTOL
     assert rel(C_gen, C_ref) < PAPER_COMPLIANCE_RTOL
-    assert rel(C_gen[:3, :3], tdct.compliance(tdct.Robot(), act, load)) < PAPER_COMPLIANCE_RTOL
+    assert rel(C_gen[:3, :3], tdct.compliance(tdct.Robot.paper(), act, load)) < PAPER_COMPLIANCE_RTOL
 
 
 # ---- (b), (c): one uniform rod, one tendon anchored inside, a point mass and a point load ----------
@@ -163,7 +163,7 @@ def rod(anchor=ANCHOR, mass=0.0):
     mass at mid-length."""
     section = tdct.Section(end=ROD_L, outer_diameter=ROD_D, E=ROD_E, nu=ROD_NU, density=0.0)
     tendon = tdct.Tendon(offset=OFFSET, angle=np.pi / 2, end=anchor)
-    return tdct.GeneralRobot(ROD_L, (section,), (tendon,), masses=(tdct.PointMass(MID, mass),))
+    return tdct.Robot(ROD_L, (section,), (tendon,), masses=(tdct.PointMass(MID, mass),))
 
 
 def point_load(force):
@@ -178,7 +178,7 @@ def rod_stiffness():
 
 @pytest.fixture(scope="session")
 def anchored():
-    return tdct.solve(rod(), tdct.GeneralActuation([TENSION]), point_load([0.0, 0.0, 0.0]), gravity=G)
+    return tdct.solve(rod(), tdct.Actuation([TENSION]), point_load([0.0, 0.0, 0.0]), gravity=G)
 
 
 def constant_strains():
@@ -234,7 +234,7 @@ def test_anchored_tendon_bends_a_circular_arc_then_straight(anchored):
 
 def test_point_force_on_a_cantilever_matches_beam_theory():
     F = 1e-5  # N: tip deflection ~ 4e-5 L, geometric nonlinearity ~ 1e-9
-    sol = tdct.solve(rod(), tdct.GeneralActuation([0.0]), point_load([0.0, -F, 0.0]), gravity=G)
+    sol = tdct.solve(rod(), tdct.Actuation([0.0]), point_load([0.0, -F, 0.0]), gravity=G)
     GA, _, EI = rod_stiffness()
     a, L = MID, ROD_L
     # Euler-Bernoulli, plus the shear of the model's K_se (no shear coefficient): F a / (G A)
@@ -245,7 +245,7 @@ def test_point_force_on_a_cantilever_matches_beam_theory():
 def test_distributed_force_on_a_cantilever_matches_beam_theory():
     w = 1e-5  # N/m, along -y: tip deflection ~ 4e-5 L
     load = tdct.Loads(point_s=[MID], point_force=[[0.0, 0.0, 0.0]], distributed_force=[0.0, -w, 0.0])
-    sol = tdct.solve(rod(), tdct.GeneralActuation([0.0]), load, gravity=G)
+    sol = tdct.solve(rod(), tdct.Actuation([0.0]), load, gravity=G)
     GA, _, EI = rod_stiffness()
     expected = w * ROD_L**4 / (8 * EI) + w * ROD_L**2 / (2 * GA)
     assert float(-sol.tip_position[1]) == pytest.approx(expected, rel=1e-6)
@@ -254,7 +254,7 @@ def test_distributed_force_on_a_cantilever_matches_beam_theory():
 
 def test_point_mass_gives_the_shape_of_the_equal_point_force():
     m = 2e-3
-    act = tdct.GeneralActuation([0.3])
+    act = tdct.Actuation([0.3])
     by_force = tdct.solve(rod(), act, point_load(m * np.asarray(G)), gravity=G)
     by_mass = tdct.solve(rod(mass=m), act, point_load([0.0, 0.0, 0.0]), gravity=G)
     np.testing.assert_allclose(by_mass.position, by_force.position, rtol=0, atol=1e-14)
@@ -264,9 +264,7 @@ def test_point_mass_gives_the_shape_of_the_equal_point_force():
 @pytest.mark.slow
 def test_derivatives_in_anchor_and_tension_match_central_differences():
     def tip(anchor, tension):
-        return tdct.solve(
-            rod(anchor), tdct.GeneralActuation(jnp.stack([tension])), point_load([0.0, 0.0, 0.0]), gravity=G
-        ).tip_position
+        return tdct.solve(rod(anchor), tdct.Actuation(jnp.stack([tension])), point_load([0.0, 0.0, 0.0]), gravity=G).tip_position
 
     J = jax.jacfwd(tip, argnums=(0, 1))(ANCHOR, TENSION)
     h_a, h_t = 1e-4, 1e-4
@@ -297,7 +295,7 @@ def loaded_two_segment():
         tip_force=TWO_TIP_FORCE, tip_moment=[0.0, 0.0, 2e-3], point_s=[POINT_S], point_force=[POINT_F], point_moment=[POINT_C]
     )
     mass = 0.005
-    return tdct.solve(two_segment(mass), tdct.GeneralActuation(TWO_TENSIONS), load, gravity=G), load, mass
+    return tdct.solve(two_segment(mass), tdct.Actuation(TWO_TENSIONS), load, gravity=G), load, mass
 
 
 def simpson(y, s):
@@ -455,7 +453,7 @@ def test_two_segment_robot_matches_an_independent_implementation():
     """Acceptance item 4; the robot of ``two_segment`` with its point mass and point load at zero."""
     sol = tdct.solve(
         two_segment(0.0),
-        tdct.GeneralActuation(TWO_TENSIONS),
+        tdct.Actuation(TWO_TENSIONS),
         tdct.Loads(tip_force=TWO_TIP_FORCE, point_s=[POINT_S], point_force=[[0.0, 0.0, 0.0]]),
         gravity=G,
     )
@@ -476,7 +474,7 @@ def test_helical_tendons_match_the_independent_implementation():
     robot = two_segment(0.0)
     tendons = tuple(dataclasses.replace(t, twist=HELIX) if i >= 3 else t for i, t in enumerate(robot.tendons))
     robot = dataclasses.replace(robot, tendons=tendons)
-    sol = tdct.solve(robot, tdct.GeneralActuation(TWO_TENSIONS), tdct.Loads(tip_force=TWO_TIP_FORCE), gravity=G)
+    sol = tdct.solve(robot, tdct.Actuation(TWO_TENSIONS), tdct.Loads(tip_force=TWO_TIP_FORCE), gravity=G)
     angles = np.radians([90, -30, 210, 150, 30, 270])
     anchors = [0.2] * 3 + [0.4] * 3
     twists = [0.0] * 3 + [HELIX] * 3
@@ -495,7 +493,7 @@ DRIVEN = (0, 2, 4, 5)  # mixed control: tendons 1 and 3 (zero tension) stay tens
 def by_tension():
     robot = tdct.Robot.from_toml(ROBOTS / "two_segment.toml")
     load = tdct.Loads(tip_force=TWO_TIP_FORCE)
-    return robot, load, tdct.solve(robot, tdct.GeneralActuation(TWO_TENSIONS), load, gravity=G)
+    return robot, load, tdct.solve(robot, tdct.Actuation(TWO_TENSIONS), load, gravity=G)
 
 
 @pytest.mark.slow
@@ -504,7 +502,7 @@ def test_displacements_fed_back_return_the_tensions_and_the_shape(by_tension):
     control (from zero tensions), give back its tensions and shape."""
     robot, load, sol = by_tension
     d = np.asarray(sol.displacements)
-    act = tdct.GeneralActuation(np.zeros(6), displacements=d[list(DRIVEN)], driven=DRIVEN)
+    act = tdct.Actuation(np.zeros(6), displacements=d[list(DRIVEN)], driven=DRIVEN)
     back = tdct.solve(robot, act, load, gravity=G)
     assert rel(back.tensions, TWO_TENSIONS) < 1e-9
     assert rel(back.position, sol.position) < 1e-9
@@ -523,9 +521,7 @@ def test_slack_exactly_where_the_tension_would_be_negative(by_tension):
     results = []
     for delta in (-eps, eps):
         command = d[list(driven)] + np.array([0.0, delta, 0.0, 0.0, 0.0])
-        results.append(
-            tdct.solve(robot, tdct.GeneralActuation(np.zeros(6), displacements=command, driven=driven), load, gravity=G)
-        )
+        results.append(tdct.solve(robot, tdct.Actuation(np.zeros(6), displacements=command, driven=driven), load, gravity=G))
     slack, taut = results
     assert list(np.asarray(slack.slack)) == [False, True, False, False, False, False]
     assert float(slack.tensions[1]) == 0.0

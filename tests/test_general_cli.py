@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import tdct_jax as tdct
-from tdct_jax import cli, fields, general, plotting
+from tdct_jax import cli, fields, plotting, rod
 from tdct_jax.cli import main
 from tdct_jax.description import ROBOTS
 from tdct_jax.options import DEFAULT_SOLVER
@@ -32,7 +32,7 @@ def two_segment():
 def test_tensions_of_any_length_give_the_api_tip(capsys, two_segment):
     assert main([*SOLVE, "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    sol = tdct.solve(two_segment, tdct.GeneralActuation(TENSIONS))
+    sol = tdct.solve(two_segment, tdct.Actuation(TENSIONS))
     np.testing.assert_allclose(out["tip_position_mm"], np.asarray(sol.tip_position) * 1e3, rtol=1e-12)
     np.testing.assert_allclose(out["tensions_N"], TENSIONS, rtol=0)
     np.testing.assert_allclose(out["displacements_mm"], np.asarray(sol.displacements) * 1e3, rtol=1e-12)
@@ -43,7 +43,7 @@ def test_set_changes_a_general_field(capsys, two_segment):
     assert main([*SOLVE, "--set", "sections[*].E=60e9", "--set", "tendons[0].offset=0.012"]) == 0
     text = capsys.readouterr().out
     robot = fields.replace(two_segment, {"sections[*].E": 60e9, "tendons[0].offset": 0.012})
-    tip = 1e3 * np.asarray(tdct.solve(robot, tdct.GeneralActuation(TENSIONS)).tip_position)
+    tip = 1e3 * np.asarray(tdct.solve(robot, tdct.Actuation(TENSIONS)).tip_position)
     assert f"tip position [mm]: x = {tip[0]:.3f}, y = {tip[1]:.3f}, z = {tip[2]:.3f}" in text
     assert "tensions [N]:      1.5000, 0.0000, 0.4000" in text and "slack tendons:     none" in text
 
@@ -53,7 +53,7 @@ def test_displacements_and_point_loads_equal_the_api(capsys, two_segment):
     argv = [*SOLVE, "--displacements-mm", "4:0.5,6:-20", "--point-load", "300:0,-0.05,0.02", "--json"]
     assert main(argv) == 0
     out = json.loads(capsys.readouterr().out)
-    act = tdct.GeneralActuation(TENSIONS, (), (0.5e-3, -20e-3), (3, 5))
+    act = tdct.Actuation(TENSIONS, (), (0.5e-3, -20e-3), (3, 5))
     load = tdct.Loads(point_s=(0.3,), point_force=((0.0, -0.05, 0.02),))
     sol = tdct.solve(two_segment, act, load)
     np.testing.assert_allclose(out["tip_position_mm"], np.asarray(sol.tip_position) * 1e3, rtol=1e-12)
@@ -96,7 +96,7 @@ def test_plot_robot_draws_sections_tendons_masses_and_loads(two_segment):
             [*SOLVE, "--point-load", "500:0,0,1"],
             "--point-load 500:0,0,1: arc length 500 is outside the allowed range [0, 400] mm",
         ),
-        ([*SOLVE, "--set", "sections[*].G=1"], "--set: 'sections[*].G' is not a scalar GeneralRobot field; allowed: length"),
+        ([*SOLVE, "--set", "sections[*].G=1"], "--set: 'sections[*].G' is not a scalar robot field; allowed: length"),
         (
             [*SOLVE, "--set", "tendons[6].offset=0.01"],
             "--set: 'tendons[6].offset': the robot has 6 tendons (indices 0 to 5, or a range a-b with a <= b)",
@@ -111,7 +111,7 @@ def test_plot_robot_draws_sections_tendons_masses_and_loads(two_segment):
             ["compliance", "--point-load", "-1:0,0,1"],
             "--point-load -1:0,0,1: arc length -1 is outside the allowed range [0, 160] mm",
         ),
-        (["calibrate", "shapes.csv", "--robot", TWO], "tdct calibrate takes the paper's robot only so far"),
+        (["calibrate", "shapes.csv", "--robot", TWO, "--params", "tubes[0].E"], "--params: 'tubes[0].E': the robot has 0 tubes"),
     ],
 )
 def test_bad_input_exits_2_before_any_solve(argv, words, capsys, monkeypatch):
@@ -126,9 +126,9 @@ def test_bad_input_exits_2_before_any_solve(argv, words, capsys, monkeypatch):
 
 
 def test_robot_without_tendons_refuses_tensions(tmp_path, capsys):
-    rod = tmp_path / "rod.toml"
-    rod.write_text("length = 0.3\n[[sections]]\nend = 0.3\nouter_diameter = 0.002\nE = 2e11\nnu = 0.3\ndensity = 7800.0\n")
-    assert main(["solve", "--robot", str(rod), "--tensions", "1"]) == 2
+    path = tmp_path / "rod.toml"
+    path.write_text("length = 0.3\n[[sections]]\nend = 0.3\nouter_diameter = 0.002\nE = 2e11\nnu = 0.3\ndensity = 7800.0\n")
+    assert main(["solve", "--robot", str(path), "--tensions", "1"]) == 2
     assert "--tensions 1: the robot has no tendons" in capsys.readouterr().err
 
 
@@ -137,8 +137,8 @@ def test_displacement_beyond_the_rest_length_is_refused(two_segment):
     letting it out (negative) is allowed. Checked before any compile."""
 
     def check(robot, d):
-        act = tdct.GeneralActuation((0.0,) * 6, (), (d,), (4,))
-        general.check_arguments(robot, act, tdct.Loads(), DEFAULT_SOLVER)
+        act = tdct.Actuation((0.0,) * 6, (), (d,), (4,))
+        rod.check_arguments(robot, act, tdct.Loads(), DEFAULT_SOLVER)
 
     check(two_segment, -0.5)
     check(two_segment, 0.3999)
@@ -151,4 +151,4 @@ def test_displacement_beyond_the_rest_length_is_refused(two_segment):
     with pytest.raises(ValueError, match=r"= 0\.4021 is outside the allowed range \(-inf, 0\.401995\) m"):
         check(helical, 0.4021)
     with pytest.raises(ValueError, match=r"displacements\[0\] \(tendons\[4\]\)"):
-        tdct.solve(two_segment, tdct.GeneralActuation((0.0,) * 6, (), (0.5,), (4,)))
+        tdct.solve(two_segment, tdct.Actuation((0.0,) * 6, (), (0.5,), (4,)))

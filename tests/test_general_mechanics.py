@@ -63,7 +63,7 @@ def pose_by_differences(robot, act, at, moved):
 
 @pytest.fixture(scope="module")
 def tip_compliance(two_segment):
-    return np.asarray(tdct.compliance(two_segment, tdct.GeneralActuation(TENSIONS), gravity=G, full=True))
+    return np.asarray(tdct.compliance(two_segment, tdct.Actuation(TENSIONS), gravity=G, full=True))
 
 
 @pytest.mark.slow
@@ -71,14 +71,14 @@ def test_tip_compliance_matches_central_differences(two_segment, tip_compliance)
     def at_tip(w):
         return tdct.Loads(tip_force=w[:3], tip_moment=w[3:], point_s=[0.3], point_force=[[0.0, 0.0, 0.0]])
 
-    fd = pose_by_differences(two_segment, tdct.GeneralActuation(TENSIONS), 0.4, at_tip)
+    fd = pose_by_differences(two_segment, tdct.Actuation(TENSIONS), 0.4, at_tip)
     assert rel(tip_compliance, fd) < FD_RTOL, [rel(tip_compliance[:, k], fd[:, k]) for k in range(6)]
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("s", [0.2, 0.3])  # the segment boundary (and segment 1's anchors), inside segment 2
 def test_compliance_at_an_arc_length_matches_central_differences(two_segment, tip_compliance, s):
-    act = tdct.GeneralActuation(TENSIONS)
+    act = tdct.Actuation(TENSIONS)
     C = np.asarray(tdct.compliance(two_segment, act, at=s, gravity=G, full=True))
 
     def at_s(w):
@@ -90,7 +90,7 @@ def test_compliance_at_an_arc_length_matches_central_differences(two_segment, ti
 
 
 def test_compliance_at_the_length_is_the_tip_compliance(two_segment, tip_compliance):
-    C = tdct.compliance(two_segment, tdct.GeneralActuation(TENSIONS), at=0.4, gravity=G, full=True)
+    C = tdct.compliance(two_segment, tdct.Actuation(TENSIONS), at=0.4, gravity=G, full=True)
     assert rel(C, tip_compliance) < 1e-12
 
 
@@ -98,7 +98,7 @@ def test_compliance_at_the_length_is_the_tip_compliance(two_segment, tip_complia
 def test_compliance_of_a_straight_cantilever_is_timoshenkos(two_segment, a):
     """No tension and no gravity: a straight uniform rod, whose compliance at s = a to a load at a is
     the clamped beam's of length a, with the model's shear stiffness G A (no shear coefficient)."""
-    C = np.asarray(tdct.compliance(two_segment, tdct.GeneralActuation(np.zeros(6)), at=a, gravity=None, full=True))
+    C = np.asarray(tdct.compliance(two_segment, tdct.Actuation(np.zeros(6)), at=a, gravity=None, full=True))
     A, I = np.pi / 4 * D**2, np.pi / 64 * D**4
     Gm = E / (2 * (1 + NU))
     EI, bend, tilt = E * I, a**3 / (3 * E * I) + a / (Gm * A), a**2 / (2 * E * I)
@@ -116,7 +116,7 @@ PARAMS = ("sections[*].E", "tendons[0].offset")
 
 @pytest.fixture(scope="module")
 def fitted(two_segment):
-    measured = tdct.synthesize(two_segment, [tdct.GeneralActuation(t) for t in CONDITIONS], noise=0.0, gravity=G, n_points=17)
+    measured = tdct.synthesize(two_segment, [tdct.Actuation(t) for t in CONDITIONS], noise=0.0, gravity=G, n_points=17)
     start = fields.replace(two_segment, {"sections[*].E": 1.2 * E, "tendons[0].offset": 0.011})
     return measured, tdct.calibrate(start, measured, PARAMS, gravity=G, progress=False)
 
@@ -130,7 +130,7 @@ def test_calibration_recovers_the_modulus_and_a_tendon_offset(two_segment, fitte
     assert fit.values["sections[*].E"] == pytest.approx(E, rel=RECOVERY_RTOL)
     assert fit.values["tendons[0].offset"] == pytest.approx(0.010, rel=RECOVERY_RTOL)
     # the fitted robot: every section's modulus and only tendon 0's offset changed
-    assert isinstance(fit.robot, tdct.GeneralRobot)
+    assert isinstance(fit.robot, tdct.Robot)
     assert [float(s.E) for s in fit.robot.sections] == [fit.values["sections[*].E"]] * 2
     assert float(fit.robot.tendons[0].offset) == fit.values["tendons[0].offset"]
     assert [float(t.offset) for t in fit.robot.tendons[1:]] == [0.010] * 5
@@ -144,12 +144,12 @@ DISPLACEMENT = 2e-3  # m, tendon 0 of the paper robot; tendon 3 at 1 N, the tube
 
 
 def paper_act(tension=1.0, displacement=DISPLACEMENT, insertion=0.08):
-    return tdct.GeneralActuation([0.0, 0.0, 0.0, tension], [insertion], [displacement], driven=(0,))
+    return tdct.Actuation([0.0, 0.0, 0.0, tension], [insertion], [displacement], driven=(0,))
 
 
 @pytest.mark.slow
 def test_actuation_jacobian_covers_tensions_displacements_and_insertions():
-    robot, load = tdct.Robot().to_general(), tdct.TipLoad.from_mass(0.02)
+    robot, load = tdct.Robot.paper(), tdct.Loads.from_mass(0.02)
     J = np.asarray(tdct.kinematic_jacobian(robot, paper_act(), load, gravity=G))
     assert J.shape == (6, 4 + 1 + 1)  # tensions, the driven tendon's displacement, the insertion
     np.testing.assert_array_equal(J[:, 0], 0.0)  # tendon 0's tension follows from its displacement
@@ -174,17 +174,17 @@ def test_actuation_jacobian_covers_tensions_displacements_and_insertions():
 @pytest.mark.parametrize(
     "params, words",
     [
-        (("sections[*].G",), ["params: 'sections[*].G' is not a scalar GeneralRobot field", "sections[i, * or a-b]"]),
+        (("sections[*].G",), ["params: 'sections[*].G' is not a scalar robot field", "sections[i, * or a-b]"]),
         (("tendons[6].offset",), ["'tendons[6].offset'", "6 tendons (indices 0 to 5, or a range a-b"]),
         (("tendons[0].stiffness",), ["tendons[0].stiffness is not set (None)"]),
-        (("E_silicone",), ["'E_silicone' is not a scalar GeneralRobot field"]),
+        (("E_robot",), ["'E_robot' is not a scalar robot field"]),
     ],
 )
 def test_bad_params_are_refused_naming_the_field(two_segment, params, words):
-    e = tdct.Experiment([0.0, 0.4], np.zeros((2, 3)), tdct.GeneralActuation(TENSIONS))
+    e = tdct.Experiment([0.0, 0.4], np.zeros((2, 3)), tdct.Actuation(TENSIONS))
     for call in (
         lambda: tdct.calibrate(two_segment, [e], params, progress=False),
-        lambda: tdct.parameter_jacobian(two_segment, tdct.GeneralActuation(TENSIONS), params=params),
+        lambda: tdct.parameter_jacobian(two_segment, tdct.Actuation(TENSIONS), params=params),
     ):
         with pytest.raises(ValueError) as err:
             call()
@@ -203,17 +203,17 @@ def test_bad_params_are_refused_naming_the_field(two_segment, params, words):
 )
 def test_bad_arc_lengths_are_refused(two_segment, at, words):
     with pytest.raises(ValueError) as err:
-        tdct.compliance(two_segment, tdct.GeneralActuation(TENSIONS), at=at)
+        tdct.compliance(two_segment, tdct.Actuation(TENSIONS), at=at)
     for w in words:
         assert w in str(err.value), (w, str(err.value))
 
 
 def test_general_experiments_stack_and_stay_out_of_shape_files(tmp_path):
     acts = [
-        tdct.GeneralActuation([1.0, 0.0], [0.05], [1e-3], driven=(1,)),
-        tdct.GeneralActuation([0.0, 2.0], [0.0], [2e-3], (1,)),
+        tdct.Actuation([1.0, 0.0], [0.05], [1e-3], driven=(1,)),
+        tdct.Actuation([0.0, 2.0], [0.0], [2e-3], (1,)),
     ]
-    loads = [tdct.TipLoad((0.0, 0.1, 0.0)), tdct.Loads(point_s=[0.1], point_force=[[0.0, 0.0, 0.2]])]
+    loads = [tdct.Loads(tip_force=(0.0, 0.1, 0.0)), tdct.Loads(point_s=[0.1], point_force=[[0.0, 0.0, 0.2]])]
     exps = [
         tdct.Experiment([0.0, 0.1], np.zeros((2, 3)), a, ld, name=str(i))
         for i, (a, ld) in enumerate(zip(acts, loads, strict=True))
@@ -225,7 +225,7 @@ def test_general_experiments_stack_and_stay_out_of_shape_files(tmp_path):
     assert batch.act.driven == (1,) and np.shape(batch.act.displacements) == (2, 1)
     np.testing.assert_array_equal(batch.load.point_s, [[0.2], [0.1]])
     np.testing.assert_array_equal(batch.tip_load(None).tip_force, np.zeros((2, 3)))
-    with pytest.raises(ValueError, match="all must be Actuations, or GeneralActuations with the same driven"):
-        tdct.data.stack([exps[0], tdct.Experiment([0.0, 0.1], np.zeros((2, 3)), tdct.Actuation((1.0, 0.0)))])
-    with pytest.raises(TypeError, match="not in the file format yet"):
+    with pytest.raises(ValueError, match="all must have the same driven tendons"):
+        tdct.data.stack([exps[0], tdct.Experiment([0.0, 0.1], np.zeros((2, 3)), tdct.Actuation((1.0, 0.0), [0.0]))])
+    with pytest.raises(ValueError, match="the shape file holds the tensions, one tube.s insertion"):
         tdct.write_experiment(tmp_path / "x.csv", exps[0])

@@ -60,7 +60,7 @@ def displacement_grid():
 
 @pytest.fixture(scope="module")
 def displacement_sweep(two_segment, displacement_grid):
-    base = tdct.GeneralActuation(BASE_TENSIONS, displacements=[0.0], driven=DRIVEN)
+    base = tdct.Actuation(BASE_TENSIONS, displacements=[0.0], driven=DRIVEN)
     return tdct.sweep(two_segment, base, grid=displacement_grid, warm_start=True, progress=False)
 
 
@@ -75,7 +75,7 @@ def test_tension_and_field_sweep_equals_single_solves(two_segment, tension_grid,
     assert res.shape == (3, 2) and res.n_failed == 0
     for i, t in enumerate(tension_grid["tensions"]):
         for j, E in enumerate(tension_grid["sections[*].E"]):
-            sol = single(two_segment, (0, 1), E, tdct.GeneralActuation(t))
+            sol = single(two_segment, (0, 1), E, tdct.Actuation(t))
             np.testing.assert_allclose(res.tip_position[i, j], sol.tip_position, rtol=0, atol=TIP_ATOL)
             np.testing.assert_array_equal(res.tensions[i, j], t)  # tension-driven: the given ones
     # the modulus matters: the stiffer body bends less under the same tensions
@@ -88,7 +88,7 @@ def test_warm_started_displacement_sweep_equals_single_solves_and_returns_the_te
     assert res.shape == (2, len(DISPLACEMENTS)) and res.n_failed == 0 and res.tensions.shape == (2, len(DISPLACEMENTS), 6)
     for j, E in enumerate([50e9, 54e9]):
         for k, d in enumerate(DISPLACEMENTS):
-            sol = single(two_segment, (1,), E, tdct.GeneralActuation(BASE_TENSIONS, displacements=d, driven=DRIVEN))
+            sol = single(two_segment, (1,), E, tdct.Actuation(BASE_TENSIONS, displacements=d, driven=DRIVEN))
             np.testing.assert_allclose(res.tip_position[j, k], sol.tip_position, rtol=0, atol=TIP_ATOL)
             np.testing.assert_allclose(res.tensions[j, k], sol.tensions, rtol=0, atol=TENSION_ATOL)
             # slack exactly where the single solve says so, with a tension of exactly 0 in both
@@ -100,14 +100,14 @@ def test_warm_started_displacement_sweep_equals_single_solves_and_returns_the_te
 @pytest.mark.parametrize(
     "grid, act, load, message",
     [
-        ({"insertion": [0.0]}, None, None, "cannot sweep 'insertion': not an input (tensions, insertions, displacements"),
+        ({"insertion": [0.0]}, None, None, "cannot sweep 'insertion': the robot has 0 tubes; sweep 'insertions', one depth each"),
         (
             {"sections[2].E": [1e9]},
             None,
             None,
             "'sections[2].E': the robot has 2 sections (indices 0 to 1, or a range a-b with a <= b)",
         ),
-        ({"tendons[*].offsett": [0.01]}, None, None, "'tendons[*].offsett' is not a scalar GeneralRobot field"),
+        ({"tendons[*].offsett": [0.01]}, None, None, "'tendons[*].offsett' is not a scalar robot field"),
         (
             {"sections[*].E": [5e10, -1.0]},
             None,
@@ -125,7 +125,7 @@ def test_warm_started_displacement_sweep_equals_single_solves_and_returns_the_te
             "point_force: each point must have shape (2, 3), got values of shape (1, 1, 3)",
         ),
         ({"insertions": [[0.0]]}, None, None, "insertions: each point must have shape (0,)"),
-        ({"tip_mass": [0.0]}, tdct.GeneralActuation(np.zeros(6), driven=(6,), displacements=[0.0]), None, "driven = (6,)"),
+        ({"tip_mass": [0.0]}, tdct.Actuation(np.zeros(6), driven=(6,), displacements=[0.0]), None, "driven = (6,)"),
     ],
 )
 def test_bad_names_and_values_error_before_any_compile(two_segment, monkeypatch, grid, act, load, message):

@@ -21,7 +21,7 @@ def round_trip(robot):
     tensions = rng.uniform(0, 10, (n, 4)) * (rng.random((n, 4)) < 0.5)
     insertion, mass = rng.uniform(0, 0.16, n), rng.uniform(0, 0.05, n)
     forward = tdct.sweep(robot, batch={"tensions": tensions, "insertion": insertion, "tip_mass": mass}, progress=False)
-    loads = tdct.TipLoad.from_mass(mass)  # a batch of loads, one per target
+    loads = tdct.Loads.from_mass(mass)  # a batch of loads, one per target
     return forward, tdct.inverse_kinematics(robot, tdct.Target(forward.tip_position), load=loads, throw=False)
 
 
@@ -47,7 +47,7 @@ def test_retried_targets_get_the_answer_of_one_ik_from_every_start(robot, round_
     hardest = np.argsort(steps)[-3:]
     assert steps[hardest].min() > np.median(steps)
     for i in hardest:
-        load = tdct.TipLoad.from_mass(float(forward.inputs["tip_mass"][i]))
+        load = tdct.Loads.from_mass(float(forward.inputs["tip_mass"][i]))
         one = tdct.inverse_kinematics(robot, tdct.Target(forward.tip_position[i]), load=load, throw=False)
         assert int(one.iterations) == steps[i] and int(one.result) == int(result.result[i])
         np.testing.assert_allclose(one.actuation.tensions, result.actuation.tensions[i], rtol=0, atol=1e-9)
@@ -130,7 +130,7 @@ def test_bad_ik_input_names_field_value_and_range(robot, make, words):
 
 
 def test_cli_ik_reaches_prints_json_and_exits_by_status(capsys, robot):
-    tip = np.asarray(tdct.solve(robot, tdct.Actuation((5.0, 0, 0, 0), 0.04), tdct.TipLoad.from_mass(0.01)).tip_position)
+    tip = np.asarray(tdct.solve(robot, tdct.Actuation((5.0, 0, 0, 0), 0.04), tdct.Loads.from_mass(0.01)).tip_position)
     target = ",".join(f"{1e3 * x:.9f}" for x in tip)
     args = [
         "ik",
@@ -193,4 +193,4 @@ def test_cli_ik_target_typed_in_metres_gets_a_note(capsys):
     )
     with pytest.warns(tdct.UnitWarning, match=r"target position: 150 m from the base is 938 robot lengths away.* millimetres"):
         with pytest.raises(ValueError, match="nothing to choose"):
-            tdct.inverse_kinematics(tdct.Robot(), (0.0, 0.0, 150.0), tendons=(1,), insertion=0.0, objective="tension")
+            tdct.inverse_kinematics(tdct.Robot.paper(), (0.0, 0.0, 150.0), tendons=(1,), insertion=0.0, objective="tension")

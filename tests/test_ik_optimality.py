@@ -14,7 +14,7 @@ from tdct_jax.cli import main
 
 
 def test_stiffest_solution_beats_every_solution_of_a_1_mm_insertion_scan(robot, stiffest):
-    load, d = tdct.TipLoad.from_mass(MASS), np.array([0.0, -1.0, 0.0])
+    load, d = tdct.Loads.from_mass(MASS), np.array([0.0, -1.0, 0.0])
     best = d @ np.asarray(tdct.compliance(robot, stiffest.actuation, load)) @ d
     np.testing.assert_allclose(stiffest.objective, best, rtol=1e-9)  # the same compliance from two solves
     scan = []
@@ -36,7 +36,7 @@ def test_ik_options_are_leaves_a_new_tol_or_max_steps_compiles_nothing(robot, st
     original values as it did."""
     from tdct_jax.ik.driver import _solve_ik
 
-    load, target = tdct.TipLoad.from_mass(MASS), tdct.Target((0.0, HEIGHT, 0.0), axes="y")
+    load, target = tdct.Loads.from_mass(MASS), tdct.Target((0.0, HEIGHT, 0.0), axes="y")
 
     def again(ik, direction=(0.0, -1.0, 0.0)):
         objective = tdct.Stiffness(direction=direction)
@@ -61,7 +61,7 @@ def test_ik_options_are_leaves_a_new_tol_or_max_steps_compiles_nothing(robot, st
 def test_stiffest_solution_is_first_order_optimal(robot, stiffest):
     """KKT from the public Jacobians: the objective's gradient is balanced by the task on the free
     inputs (multiplier lam), and pushes against every input held at a bound."""
-    load, d = tdct.TipLoad.from_mass(MASS), np.array([0.0, -1.0, 0.0])
+    load, d = tdct.Loads.from_mass(MASS), np.array([0.0, -1.0, 0.0])
     act = stiffest.actuation
 
     def compliance_along(w):  # w = (tension 1 [N], insertion [m])

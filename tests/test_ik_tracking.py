@@ -17,8 +17,8 @@ def path(robot):
     phase = 2 * np.pi * np.arange(N_PATH) / N_PATH
     tensions = np.zeros((N_PATH, 4))
     tensions[:, 0], tensions[:, 1] = 4 + 2 * np.sin(phase), 3 + 2 * np.cos(phase)
-    load = tdct.TipLoad.from_mass(0.02)
-    forward = tdct.sweep(robot, tdct.Actuation(insertion=INSERTION), load, batch={"tensions": tensions}, progress=False)
+    load = tdct.Loads.from_mass(0.02)
+    forward = tdct.sweep(robot, tdct.Actuation(insertions=INSERTION), load, batch={"tensions": tensions}, progress=False)
     return tensions, load, np.asarray(forward.tip_position)
 
 

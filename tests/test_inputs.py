@@ -17,7 +17,7 @@ import tdct_jax as tdct
         (dict(tensions=(np.inf, 0, 0, 0)), ["tensions", "finite"]),
         (dict(insertion=-0.01), ["insertion", "-0.01", "[0"]),
         (dict(insertion="deep"), ["insertion", "numeric"]),
-        (dict(tensions=((1.0, 2.0),)), ["tensions", "shape"]),
+        (dict(tensions=((1.0, 2.0),), insertions=(0.0, 0.1, 0.2)), ["tensions", "shape"]),
     ],
 )
 def test_bad_actuation(kwargs, words):
@@ -53,12 +53,12 @@ def test_bad_tip_load():
     with pytest.raises(ValueError, match="moment must be finite"):
         tdct.TipLoad(moment=(0.0, np.nan, 0.0))
     with pytest.raises(ValueError, match="mass"):
-        tdct.TipLoad.from_mass(-0.01)
+        tdct.Loads.from_mass(-0.01)
 
 
 def test_solve_checks_insertion_against_length_and_tendon_count(robot):
-    with pytest.raises(ValueError, match=r"insertion = 0.2 is outside the allowed range \[0, 0.16\]"):
-        tdct.solve(robot, tdct.Actuation(insertion=0.2))
+    with pytest.raises(ValueError, match=r"insertions = \[0.2\] is outside the allowed range \[0, 0.16\]"):
+        tdct.solve(robot, tdct.Actuation(insertions=0.2))
     with pytest.raises(ValueError, match="4 tendons"):
         tdct.solve(robot, tdct.Actuation(tensions=(1.0, 2.0, 3.0)))
     with pytest.raises(ValueError, match="transition"):
@@ -125,7 +125,7 @@ FAILURES = {  # each failure kind, forced: (actuation, solver options, what the 
 @pytest.mark.parametrize("code", FAILURES)
 def test_each_failure_kind_has_its_code_and_raises_its_own_message(robot, code):
     act, solver, words = FAILURES[code]
-    load = tdct.TipLoad.from_mass(0.02)
+    load = tdct.Loads.from_mass(0.02)
     sol = tdct.solve(robot, act, load, solver=solver, throw=False)
     assert int(sol.result) == code and not bool(sol.converged)
     # One Newton step per load stage at least: the plain attempt, then ramps of 4 and 16 stages.
@@ -215,7 +215,7 @@ def test_inputs_beyond_the_calibrated_range_warn_but_solve(robot, tmp_path):
         (lambda: tdct.Robot(E_tube=83.0), "did you mean 83 GPa (8.3e+10 Pa)?"),
         (lambda: tdct.Robot(density_silicone=1.13), "did you mean 1.13 g/cm^3 (1130 kg/m^3)?"),
         (
-            lambda: tdct.TipLoad.from_mass(0.01, gravity=(0, -9810, 0)),
+            lambda: tdct.Loads.from_mass(0.01, gravity=(0, -9810, 0)),
             "|gravity| = 9810 m/s^2 is far outside the plausible range [0, 100] m/s^2: did you mean 9810 mm/s^2 (9.81 m/s^2)?",
         ),
     ],
@@ -231,7 +231,7 @@ def test_plausible_values_get_no_unit_note(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error", tdct.UnitWarning)
         tdct.Robot(length=0.5, E_silicone=2e6, tendon_channel_diameter=0.0, density_silicone=0.0)
-        tdct.TipLoad.from_mass(0.01, gravity=(0.0, -1.62, 0.0))  # the moon
+        tdct.Loads.from_mass(0.01, gravity=(0.0, -1.62, 0.0))  # the moon
     long = tmp_path / "long.toml"
     long.write_text("length = 160\n")
     with pytest.warns(tdct.UnitWarning, match=r"robot file .*long.toml: length = 160 m .* did you mean 160 millimetres"):

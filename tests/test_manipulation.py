@@ -1,6 +1,6 @@
 """Load capacity and optimal insertion (Sec. V.A): defined by the solver's own tip height, checked there."""
 
-import dataclasses
+import inspect
 
 import jax
 import numpy as np
@@ -10,7 +10,7 @@ import tdct_jax as tdct
 
 
 def tip_y(robot, act, mass):
-    return float(tdct.solve(robot, act, tdct.TipLoad.from_mass(mass), throw=True).tip_position[1])
+    return float(tdct.solve(robot, act, tdct.Loads.from_mass(mass), throw=True).tip_position[1])
 
 
 @pytest.fixture(scope="module")
@@ -35,9 +35,9 @@ def test_capacity_is_differentiable_in_robot_parameters(robot):
     act = tdct.Actuation((8.0, 0, 0, 0), 0.05)
 
     def mass(offset):
-        return tdct.capacity(dataclasses.replace(robot, tendon_offset=offset), act).mass
+        return tdct.capacity(robot.replace({"tendons[*].offset": offset}), act).mass
 
-    r = float(robot.tendon_offset)
+    r = float(robot.tendons[0].offset)
     exact = jax.grad(mass)(r)  # called as the manipulation guide calls it: the same compiled programs
     h = 1e-6
     central = (mass(r + h) - mass(r - h)) / (2 * h)
@@ -61,7 +61,7 @@ def test_a_tip_that_cannot_reach_the_height_is_unreachable(robot, capacities):
 
 @pytest.mark.slow
 def test_optimal_insertion_is_a_stationary_maximum(robot):
-    act, load = tdct.Actuation((10.0, 0, 0, 0)), tdct.TipLoad.from_mass(0.05)
+    act, load = tdct.Actuation((10.0, 0, 0, 0)), tdct.Loads.from_mass(0.05)
     res = tdct.optimal_insertion(robot, act, load, n_curve=9, progress=False)
     d = float(res.insertion)
     assert res.converged and res.interior and 0.0 < d < float(robot.length)
@@ -81,3 +81,15 @@ def test_capacity_grid_saves_to_csv_and_npz(capacities, tmp_path):
     data = np.load(capacities.save_npz(tmp_path / "c.npz"))
     np.testing.assert_array_equal(data["mass"], capacities.mass)
     np.testing.assert_array_equal(data["axis_insertion"], [0.0, 0.07])
+
+
+def test_the_grid_entry_points_take_the_solver_by_name():
+    for f in (tdct.load_capacity, tdct.optimal_insertion, tdct.capacity, tdct.insertion_optimum):
+        p = inspect.signature(f).parameters["solver"]
+        assert p.kind is p.KEYWORD_ONLY and p.default is tdct.options.DEFAULT_SOLVER
+
+
+def test_the_insertion_optimum_needs_a_tube(robot):
+    bare = tdct.Robot(length=robot.length, sections=robot.sections, tendons=robot.tendons)
+    with pytest.raises(ValueError, match="no tube"):
+        tdct.optimal_insertion(bare, tdct.Actuation((10.0, 0, 0, 0)), progress=False)

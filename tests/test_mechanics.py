@@ -1,29 +1,28 @@
 """Exact compliance and Jacobians against closed forms and central differences of the solve."""
 
-import dataclasses
-
 import jax
 import numpy as np
 import pytest
-from conftest import NO_GRAVITY, rel_err
+from conftest import NO_GRAVITY, rel_err, section
 
 import tdct_jax as tdct
 from tdct_jax import shooting
-from tdct_jax.loads import gravity_vector
+from tdct_jax.inputs import gravity_vector
 
-BENT = (tdct.Actuation(tensions=(8.0, 0.0, 0.0, 3.0), insertion=0.05), tdct.TipLoad(force=(0.05, -0.3, 0.02)))
+BENT = (tdct.Actuation(tensions=(8.0, 0.0, 0.0, 3.0), insertions=0.05), tdct.Loads(tip_force=(0.05, -0.3, 0.02)))
 
 
 @pytest.mark.parametrize("insertion", [0.0, 0.16])
 def test_straight_cantilever_compliance_is_timoshenkos(robot, insertion):
-    CM = np.asarray(tdct.compliance(robot, tdct.Actuation(insertion=insertion), gravity=NO_GRAVITY))
-    L, (I_x, I_y) = robot.length, robot.second_moments_silicone
-    E, EA = robot.E_silicone, robot.E_silicone * robot.area_silicone
+    CM = np.asarray(tdct.compliance(robot, tdct.Actuation(insertions=insertion), gravity=NO_GRAVITY))
+    sec = section(robot)
+    L, I_x, I_y = float(robot.length), sec.I_x, sec.I_y
+    E, EA = sec.E, sec.E * sec.A
     if insertion == 0:
-        shear = L / (robot.G_silicone * robot.area_silicone)
+        shear = L / (sec.G * sec.A)
         bend = [L**3 / (3 * E * I_y) + shear, L**3 / (3 * E * I_x) + shear]
     else:  # the tube forbids shear
-        EI_tube = robot.E_tube * robot.second_moment_tube
+        EI_tube = sec.EI_tube
         bend = [L**3 / (3 * (E * I_y + EI_tube)), L**3 / (3 * (E * I_x + EI_tube))]
     assert rel_err(CM, np.diag([*bend, L / EA])) < 1e-6
 
@@ -38,7 +37,7 @@ def test_autodiff_compliance_matches_central_differences_when_bent(robot):
     # Rotation block: a small tip force rotates R(L) by the rotation vector full[3:, :3] @ dF.
     dF = np.array([0.0, 1e-5, 0.0])
     R0 = tdct.solve(robot, act, load).tip_rotation
-    R1 = tdct.solve(robot, act, tdct.TipLoad(load.force + dF)).tip_rotation
+    R1 = tdct.solve(robot, act, tdct.Loads(tip_force=load.tip_force + dF)).tip_rotation
     W = np.asarray(R1 @ R0.T)
     assert rel_err((W - W.T)[[2, 0, 1], [1, 2, 0]] / 2, np.asarray(full[3:, :3]) @ dF) < 1e-4
 
@@ -48,7 +47,7 @@ def test_compliance_is_differentiable_in_the_insertion_and_a_tension(robot):
     """The compliance comes from Newton's Jacobians at the root; its own derivative must still be
     the derivative (not the zero tangent of a by-product): against central differences. In
     (tension 1, insertion), as tests/test_ik_optimality.py differentiates it: one program."""
-    load = tdct.TipLoad.from_mass(0.02)
+    load = tdct.Loads.from_mass(0.02)
 
     def CM(w):  # w = (tension 1 [N], insertion [m])
         return tdct.compliance(robot, tdct.Actuation(jax.numpy.stack([w[0], 0.0, 0.0, 0.0]), w[1]), load, throw=False)
@@ -66,7 +65,7 @@ def test_compliance_from_newtons_jacobians_at_a_root_is_differentiable(robot):
     """``shooting.jacobians_at_root`` (how an IK answer's stiffness objective gets its value): the
     compliance from Newton's Jacobians at a root is tdct.compliance, and its derivative in (tension
     1, insertion) equals central differences of tdct.compliance (the points and steps above)."""
-    load, g, solver = tdct.TipLoad.from_mass(0.02), gravity_vector(tdct.STANDARD_GRAVITY), tdct.SolverOptions()
+    load, g, solver = tdct.Loads.from_mass(0.02), gravity_vector(tdct.STANDARD_GRAVITY), tdct.SolverOptions()
 
     def actuation(w):  # w = (tension 1 [N], insertion [m])
         return tdct.Actuation(jax.numpy.stack([w[0], 0.0, 0.0, 0.0]), w[1])
@@ -93,8 +92,8 @@ def test_compliance_from_newtons_jacobians_at_a_root_is_differentiable(robot):
 
 @pytest.mark.parametrize("d", [1e-4, 0.08, 0.16 - 1e-4])
 def test_insertion_column_of_kinematic_jacobian_matches_differences(robot, d):
-    act = tdct.Actuation(tensions=(10.0, 0.0, 0.0, 0.0), insertion=d)
-    load = tdct.TipLoad.from_mass(0.05)
+    act = tdct.Actuation(tensions=(10.0, 0.0, 0.0, 0.0), insertions=d)
+    load = tdct.Loads.from_mass(0.05)
     J = np.asarray(tdct.kinematic_jacobian(robot, act, load))
     assert J.shape == (6, 5)
     # Fourth-order central differences: the tip curves sharply in d near d = L.
@@ -106,12 +105,12 @@ def test_insertion_column_of_kinematic_jacobian_matches_differences(robot, d):
 
 def test_parameter_jacobian_matches_differences(paper_case):
     robot, act, load, _ = paper_case
-    J = np.asarray(tdct.parameter_jacobian(robot, act, load, params=("E_silicone", "tendon_offset")))
-    for k, (name, h) in enumerate([("E_silicone", 1e2), ("tendon_offset", 1e-7)]):
-        value = float(getattr(robot, name))
-        tips = [tdct.solve(dataclasses.replace(robot, **{name: value + s * h}), act, load).tip_position for s in (1, -1)]
+    J = np.asarray(tdct.parameter_jacobian(robot, act, load, params=("sections[*].E", "tendons[*].offset")))
+    for k, (name, h) in enumerate([("sections[*].E", 1e2), ("tendons[*].offset", 1e-7)]):
+        value = tdct.fields.value(robot, name)
+        tips = [tdct.solve(robot.replace({name: value + s * h}), act, load).tip_position for s in (1, -1)]
         assert rel_err(J[:3, k], (tips[0] - tips[1]) / (2 * h)) < 1e-6
-    with pytest.raises(ValueError, match="'stiffness' is not a scalar Robot field"):
+    with pytest.raises(ValueError, match="'stiffness' is not a scalar robot field"):
         tdct.parameter_jacobian(robot, act, load, params=("stiffness",))
 
 
@@ -128,8 +127,8 @@ def test_ellipsoid_of_a_symmetric_matrix_has_eigenvalues_as_semi_axes():
 
 
 def test_bad_input_and_non_convergence_fail_loudly(robot):
-    with pytest.raises(ValueError, match="insertion = 0.3 is outside"):
-        tdct.compliance(robot, tdct.Actuation(insertion=0.3))
+    with pytest.raises(ValueError, match=r"insertions = \[0.3\] is outside"):
+        tdct.compliance(robot, tdct.Actuation(insertions=0.3))
     act, load = BENT
     with pytest.raises(tdct.ConvergenceError):
         tdct.compliance(robot, act, load, solver=tdct.SolverOptions(max_iter=1))

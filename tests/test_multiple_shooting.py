@@ -35,7 +35,7 @@ def solutions(robot):
     """Single (K = 1) and multiple (K) shooting solutions of every case."""
     out = {}
     for name, (t, d, m) in CASES.items():
-        act, load = tdct.Actuation(t, d), tdct.TipLoad.from_mass(m)
+        act, load = tdct.Actuation(t, d), tdct.Loads.from_mass(m)
         out[name] = [tdct.solve(robot, act, load, solver=tdct.SolverOptions(intervals=k)) for k in (1, K)]
     return out
 
@@ -63,27 +63,27 @@ def test_large_bending(solutions):
 @pytest.mark.parametrize("k", [2, 8])
 def test_other_interval_counts(robot, k):
     t, d, m = CASES["large bending, no tube"]
-    act, load = tdct.Actuation(t, d), tdct.TipLoad.from_mass(m)
+    act, load = tdct.Actuation(t, d), tdct.Loads.from_mass(m)
     single = tdct.solve(robot, act, load)
     multi = tdct.solve(robot, act, load, solver=tdct.SolverOptions(intervals=k))
     np.testing.assert_allclose(multi.position, single.position, rtol=0, atol=TIP_TOL)
 
 
 def _tip_derivatives(robot, act, load, solver):
-    """d tip / d(tensions, insertion, E_silicone) by implicit differentiation, (3, 6)."""
+    """d tip / d(tensions, insertion, silicone modulus) by implicit differentiation, (3, 6)."""
 
     def tip(v):
-        r = dataclasses.replace(robot, E_silicone=v[5])
+        r = robot.replace({"sections[*].E": v[5]})
         return tdct.solve(r, tdct.Actuation(v[:4], v[4]), load, solver=solver, throw=False).tip_position
 
-    v = jnp.concatenate([jnp.asarray(act.tensions, float), jnp.array([act.insertion, robot.E_silicone])])
+    v = jnp.concatenate([jnp.asarray(act.tensions, float), jnp.array([act.insertion, robot.sections[0].E])])
     return jax.jacfwd(tip)(v)
 
 
 @pytest.mark.slow
 def test_implicit_derivatives_and_compliance(robot):
     t, d, m = CASES["Fig. 6"]
-    act, load = tdct.Actuation(t, d), tdct.TipLoad.from_mass(m)
+    act, load = tdct.Actuation(t, d), tdct.Loads.from_mass(m)
     single, multi = tdct.SolverOptions(), tdct.SolverOptions(intervals=K)
     D1, DK = (_tip_derivatives(robot, act, load, s) for s in (single, multi))
     for j in range(D1.shape[1]):  # each input's column on its own scale
@@ -94,7 +94,7 @@ def test_implicit_derivatives_and_compliance(robot):
 
 def test_non_convergence_is_reported(robot):
     t, d, m = CASES["large bending, no tube"]
-    act, load = tdct.Actuation(t, d), tdct.TipLoad.from_mass(m)
+    act, load = tdct.Actuation(t, d), tdct.Loads.from_mass(m)
     solver = tdct.SolverOptions(intervals=K, max_iter=1)  # a leaf: the same compiled program
     sol = tdct.solve(robot, act, load, solver=solver, throw=False)
     assert not sol.converged
@@ -112,14 +112,16 @@ def test_bad_intervals(value, words):
 
 
 def test_interval_count_must_divide_the_steps(robot):
-    """Checked against the robot (its step count is the paper robot's 2 x 20, a GeneralRobot's
-    breakpoint intervals x 20) before anything compiles."""
+    """Checked against the robot (its step count is its breakpoint intervals x 20: the paper
+    robot's 2 x 20) before anything compiles."""
     act = tdct.Actuation((1.0, 0, 0, 0), 0.05)
-    with pytest.raises(ValueError, match=r"intervals = 3 must divide the 2 \* steps = 40 .*one of \[1, 2, 4, 5, 8"):
+    with pytest.raises(
+        ValueError, match=r"intervals = 3: a robot with 2 breakpoint intervals .*2 x 20 = 40: one of \[1, 2, 4, 5, 8"
+    ):
         tdct.solve(robot, act, solver=tdct.SolverOptions(intervals=3))
     general, loads = _general_robot()
     with pytest.raises(ValueError) as e:
-        tdct.solve(general, tdct.GeneralActuation(GENERAL_TENSIONS), loads, solver=tdct.SolverOptions(intervals=3))
+        tdct.solve(general, tdct.Actuation(GENERAL_TENSIONS), loads, solver=tdct.SolverOptions(intervals=3))
     for w in ["intervals = 3", "7 breakpoint intervals", "7 x 20 = 140", "[1, 2, 4, 5, 7, 10, 14, 20, 28, 35, 70, 140]"]:
         assert w in str(e.value)
 
@@ -158,8 +160,8 @@ def _general_robot():
 
 
 GENERAL_CASES = {
-    "tensions": tdct.GeneralActuation(GENERAL_TENSIONS),
-    "displacements": tdct.GeneralActuation(np.zeros(6), displacements=DISPLACEMENTS, driven=DRIVEN),
+    "tensions": tdct.Actuation(GENERAL_TENSIONS),
+    "displacements": tdct.Actuation(np.zeros(6), displacements=DISPLACEMENTS, driven=DRIVEN),
 }
 
 
@@ -201,7 +203,7 @@ def test_general_robot_implicit_derivatives():
     def derivatives(solver):
         def tip(v):
             r = fields.replace(robot, {"sections[*].E": v[6]})
-            return tdct.solve(r, tdct.GeneralActuation(v[:6]), loads, gravity=G, solver=solver, throw=False).tip_position
+            return tdct.solve(r, tdct.Actuation(v[:6]), loads, gravity=G, solver=solver, throw=False).tip_position
 
         return jax.jacfwd(tip)(jnp.array([*GENERAL_TENSIONS, float(robot.sections[0].E)]))
 

@@ -39,7 +39,7 @@ def test_highest_reach_is_the_maximum_of_the_tip_height(robot):
     top = paper.highest_reach(robot, n_tensions=3, n_insertions=17, progress=False)
     assert top.converged and top.on_bound and top.tension == 10.0
     assert abs(top.slope_insertion) < 1e-9 and top.slope_tension > 0
-    load = tdct.TipLoad.from_mass(paper.VA_MASS)
+    load = tdct.Loads.from_mass(paper.VA_MASS)
 
     def height(tension, depth):
         return float(tdct.solve(robot, tdct.Actuation((tension, 0, 0, 0), depth), load).tip_position[1])

@@ -18,7 +18,7 @@ from tdct_jax.cli import main
 
 sweep_module = importlib.import_module("tdct_jax.sweep")  # the module: tdct_jax.sweep is the function
 
-ROBOT = tdct.Robot(E_silicone=0.9e6)
+ROBOT = tdct.Robot.paper(E_silicone=0.9e6)
 SOLVER = tdct.SolverOptions(steps=4)
 BASE = tdct.Actuation((0.0, 0.0, 0.0, 2.0), 0.0)
 # 9 points in chunks of 2: 5 chunks, the last padded
@@ -122,7 +122,7 @@ def interrupted(tmp_path_factory):
     [
         (dict(grid={**GRID, "insertion": np.array([0.0, 0.08, 0.15])}), "grid axis insertion: values differ"),
         (dict(grid={**GRID, "insertion": np.array([0.0, 0.16])}), "grid axis insertion: shape (3,) then (2,)"),
-        (dict(robot=tdct.Robot()), "robot.E_silicone: 900000.0 then 850000.0"),
+        (dict(robot=tdct.Robot.paper()), "robot.sections[0].E: 900000.0 then 850000.0"),
         (dict(solver=tdct.SolverOptions(steps=4, tol=1e-12)), "solver.tol: 1e-10 then 1e-12"),
         (dict(chunk_size=4), "chunk_size: 2 then 4"),
         (dict(act=tdct.Actuation((1.0, 0.0, 0.0, 2.0))), "act.tensions: [0.0, 0.0, 0.0, 2.0] then [1.0, 0.0, 0.0, 2.0]"),

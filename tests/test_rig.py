@@ -234,3 +234,19 @@ def test_cli_bad_dataset_exits_2(tmp_path, capsys, edit, words):
     (tmp_path / "dataset.toml").write_text(edit((DATA / "dataset.toml").read_text()))
     assert cli.main(["calibrate", "--dataset", str(tmp_path / "dataset.toml"), "--quiet"]) == 2
     assert words in capsys.readouterr().err
+
+
+def test_a_sample_solves_by_multiple_shooting_where_the_solver_asks(lab, monkeypatch):
+    """``solver.intervals`` > 1 reaches multiple shooting (``roots.root``), with the same tip and unknowns."""
+    from tdct_jax import multiple
+
+    calls, root = [], multiple.root
+    monkeypatch.setattr(multiple, "root", lambda *args: calls.append(1) or root(*args))
+    servo, guess = np.linspace(0.0, 2e-3, lab.robot.n_tendons), np.full(6 + lab.robot.n_tendons, np.nan)
+    sample = jax.jit(rigs.solve_sample, static_argnames="solver")
+    one = sample(lab, servo, guess, RIG_SOLVER)
+    assert not calls
+    two = sample(lab, servo, guess, dataclasses.replace(RIG_SOLVER, intervals=2))
+    assert calls and int(one[2]) == int(two[2]) == 0
+    np.testing.assert_allclose(two[0], one[0], rtol=0, atol=1e-11)
+    np.testing.assert_allclose(two[1], one[1], rtol=1e-8, atol=1e-10)

@@ -1,6 +1,5 @@
 """Solver behaviour: convergence over the operating envelope, vmap, gradients, no retracing."""
 
-import dataclasses
 import importlib
 import logging
 import math
@@ -14,7 +13,7 @@ from conftest import rel_err
 
 import tdct_jax as tdct
 from tdct_jax import shooting, status
-from tdct_jax.loads import gravity_vector
+from tdct_jax.inputs import gravity_vector
 from tdct_jax.newton import lazily
 
 
@@ -30,7 +29,7 @@ def envelope(n, seed=0):
 
 def batched_solve(robot):
     def one(tau, d, f):
-        return tdct.solve(robot, tdct.Actuation(tau, d), tdct.TipLoad(f))
+        return tdct.solve(robot, tdct.Actuation(tau, d), tdct.Loads(tip_force=f))
 
     return jax.jit(jax.vmap(one))
 
@@ -48,7 +47,7 @@ def test_converges_over_the_operating_envelope(robot):
     assert np.asarray(sol.residual_norm).max() <= 1e-10
     # vmap equals one-by-one solves.
     for i in (0, 7, 123):
-        single = tdct.solve(robot, tdct.Actuation(tensions[i], insertion[i]), tdct.TipLoad(force[i]))
+        single = tdct.solve(robot, tdct.Actuation(tensions[i], insertion[i]), tdct.Loads(tip_force=force[i]))
         np.testing.assert_allclose(sol.position[i], single.position, rtol=0, atol=1e-12)
 
 
@@ -57,7 +56,7 @@ def test_no_retracing_when_only_values_change(paper_case, caplog):
     with jax.log_compiles(), caplog.at_level(logging.WARNING, logger="jax"):
         for tau in (1.0, 2.0, 3.0):
             solver = tdct.SolverOptions(tol=1e-10 * tau, max_iter=40 + int(tau))  # leaves: no recompile either
-            r = dataclasses.replace(robot, E_silicone=tau * 1e6)
+            r = robot.replace({"sections[*].E": tau * 1e6})
             tdct.solve(r, tdct.Actuation((tau, 0, 0, 0), 0.01 * tau), load, solver=solver)
     compiles = [r.getMessage() for r in caplog.records if "Compiling" in r.getMessage()]
     assert not any("solution_and_compliance" in m for m in compiles), compiles
@@ -191,7 +190,7 @@ def test_reverse_and_forward_gradients_agree_with_central_differences(paper_case
     robot, act, load, _ = paper_case
 
     def tip_y(E, tau1):
-        r = dataclasses.replace(robot, E_silicone=E)
+        r = robot.replace({"sections[*].E": E})
         return tdct.solve(r, tdct.Actuation(jnp.stack([tau1, 0.0, 0.0, 0.0]), act.insertion), load).tip_position[1]
 
     g = jax.grad(tip_y, argnums=(0, 1))(0.85e6, 6.0)
@@ -231,13 +230,10 @@ def test_single_solves_go_to_the_cpu_where_a_gpu_is_the_default(robot, monkeypat
     assert put == [cpu]  # traced arguments (jit, vmap, sweeps) stay where they are
 
 
-@pytest.mark.parametrize("general", [False, True], ids=["Robot", "to_general"])
-def test_rotation_layouts_give_the_same_solve(paper_case, general):
+def test_rotation_layouts_give_the_same_solve(paper_case):
     """R carried whole or by its columns (SolverOptions.rotation) is the same arithmetic in
     another order: the same Newton steps, shapes and base wrenches to round-off."""
     robot, act, load, _ = paper_case
-    if general:
-        robot, act = robot.to_general(), tdct.GeneralActuation(act.tensions, [act.insertion])
     sols = [tdct.solve(robot, act, load, solver=tdct.SolverOptions(rotation=r)) for r in ("columns", "matrix")]
     assert int(sols[0].iterations) == int(sols[1].iterations)
     np.testing.assert_allclose(sols[0].position, sols[1].position, rtol=0, atol=1e-15)

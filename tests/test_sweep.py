@@ -29,7 +29,7 @@ def test_grid_sweep_equals_one_by_one_solves(robot, grid_sweep):
     assert res.shape == (3, 2) and res.n_failed == 0
     for i, d in enumerate(GRID["insertion"]):
         for j, m in enumerate(GRID["tip_mass"]):
-            single = tdct.solve(robot, tdct.Actuation(BASE.tensions, d), tdct.TipLoad.from_mass(m))
+            single = tdct.solve(robot, tdct.Actuation(BASE.tensions, d), tdct.Loads.from_mass(m))
             # the batch engine's first pass is a quasi-Newton method: the same root, to the tolerance
             np.testing.assert_allclose(res.tip_position[i, j], single.tip_position, rtol=0, atol=1e-9)
             np.testing.assert_allclose(res.tip_angle[i, j], single.tip_angle, rtol=0, atol=1e-8)
@@ -39,11 +39,11 @@ def test_grid_sweep_equals_one_by_one_solves(robot, grid_sweep):
 
 @pytest.mark.slow
 def test_batch_of_robot_fields_zips_points(robot):
-    batch = {"E_silicone": np.array([0.7e6, 1.1e6]), "insertion": np.array([0.02, 0.12])}
+    batch = {"sections[*].E": np.array([0.7e6, 1.1e6]), "insertion": np.array([0.02, 0.12])}
     res = tdct.sweep(robot, BASE, batch=batch, shapes=True, compliance=True, progress=False)
-    assert res.shape == (2,) and res.position.shape == (2, 2 * STEPS + 1, 3)
+    assert res.shape == (2,) and res.position.shape == (2, 2 * (STEPS + 1), 3)
     for k in range(2):
-        r = tdct.Robot(E_silicone=batch["E_silicone"][k])
+        r = tdct.Robot.paper(E_silicone=batch["sections[*].E"][k])
         act = tdct.Actuation(BASE.tensions, batch["insertion"][k])
         np.testing.assert_allclose(res.position[k], tdct.solve(r, act).position, rtol=0, atol=1e-9)
         np.testing.assert_allclose(res.compliance[k], tdct.compliance(r, act), rtol=1e-9)
@@ -92,7 +92,7 @@ def test_results_save_to_npz_and_csv(grid_sweep, tmp_path):
             "tensions[0] = [-1.,  0.,  0.,  0.] is outside the allowed range [0, inf]",
         ),
         (dict(grid={"tip_mass": [np.nan]}), "tip_mass must be finite"),
-        (dict(grid={"E_silicone": [-1.0]}), "E_silicone = -1 is outside the allowed range (0, inf]"),
+        (dict(grid={"sections[*].E": [-1.0]}), "sections[0].E = -1 is outside the allowed range (0, inf]"),
         (dict(batch={"insertion": [0.0, 0.1], "tip_mass": [0.0]}), "same number of points"),
         (dict(batch={"insertion": [0.0]}, warm_start=True), "warm_start=True needs grid="),
         (dict(), "give exactly one of grid="),
@@ -122,8 +122,8 @@ def test_sharded_sweep_on_two_devices_equals_one_device():
         import json, jax, numpy as np, tdct_jax as tdct
         assert jax.device_count() == 2, jax.devices()
         grid = {"insertion": np.linspace(0.0, 0.16, 3), "tensions": np.outer([0.0, 4.0, 9.0], [1.0, 0.0, 0.0, 0.5])}
-        two = tdct.sweep(tdct.Robot(), grid=grid, progress=False)
-        one = tdct.sweep(tdct.Robot(), grid=grid, progress=False, devices=jax.devices()[:1])
+        two = tdct.sweep(tdct.Robot.paper(), grid=grid, progress=False)
+        one = tdct.sweep(tdct.Robot.paper(), grid=grid, progress=False, devices=jax.devices()[:1])
         print(json.dumps(dict(two=two.tip_position.tolist(), one=one.tip_position.tolist(), failed=two.n_failed)))
         """
     )

@@ -64,16 +64,16 @@ from .problem import describe_task as describe_task
 
 
 def inverse_kinematics(
-    robot: Robot | Robot,
+    robot: Robot,
     target,
     *,
-    load: TipLoad | Loads | None = None,
+    load: Loads | None = None,
     tendons=None,
     tubes=None,
     insertion=None,
     bounds: Bounds = DEFAULT_BOUNDS,
     objective=None,
-    guess: Actuation | Actuation | None = None,
+    guess: Actuation | None = None,
     ik: IKOptions = DEFAULT_IK,
     gravity=STANDARD_GRAVITY,
     solver: SolverOptions = DEFAULT_SOLVER,
@@ -82,19 +82,19 @@ def inverse_kinematics(
     """Tensions and insertion that put the tip at ``target`` (paper Secs. V.A, V.B; module docstring).
 
     Args:
-        robot: the paper's ``Robot`` or any ``Robot``.
+        robot: the ``Robot`` (``Robot.paper()``, ``Robot.from_toml(path)``, ...).
         target: a Target (or a tip position [m], (3,)); a leading batch axis on its fields solves
             many targets at once (``jax.vmap``).
-        load: tip force [N] and moment [N m], world frame, held while reaching; none by default.
-            For a Robot also ``Loads`` (one for every target).
-        tendons: the free tendons, numbered from 1 like the paper (a Robot's tendon i + 1
-            is its ``tendons[i]``): a number or a sequence (default all); the others keep the
-            tension ``guess`` gives them (default 0). A tendon that ``guess`` (a Actuation)
+        load: ``Loads`` (tip force [N] and moment [N m], world frame, and loads along the body),
+            held while reaching; none by default. A leading batch axis gives each target its own.
+        tendons: the free tendons, numbered from 1 like the paper (tendon i + 1 is the
+            robot's ``tendons[i]``): a number or a sequence (default all); the others keep the
+            tension ``guess`` gives them (default 0). A tendon that ``guess`` (an Actuation)
             lists in ``driven`` is free in its displacement, its tension found by the solve.
-        tubes: a Robot's free tubes, numbered from 1 (default all); the others keep the
+        tubes: the free tubes, numbered from 1 (default all); the others keep the
             depth ``guess`` gives them (default 0).
-        insertion: None (free) or a fixed insertion depth [m] (a Robot: every tube's, one
-            depth or one per tube).
+        insertion: None (free) or a fixed insertion depth [m] of every tube (one depth or one
+            per tube).
         bounds: Bounds on the free tensions [N], insertions [m] and displacements [m]; never
             violated (a driven tendon's tension is not bounded).
         objective: among redundant solutions (free inputs beyond the task's dimensions), the one
@@ -106,7 +106,7 @@ def inverse_kinematics(
             "stiffness", "tension" and "insertion" name the first three with their defaults.
             None: the first solution found. With no more free inputs than task coordinates
             there is nothing to choose: a ValueError says so.
-        guess: an Actuation (a Robot: a Actuation) to start from (free inputs) and
+        guess: an Actuation to start from (free inputs) and
             to take the fixed inputs from.
         ik: ``IKOptions``: the method, the tolerance on the scaled task residual and the step
             limit (changing the numbers does not compile a new program).

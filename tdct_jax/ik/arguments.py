@@ -9,10 +9,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import general
 from ..checks import UnitWarning, array_module, as_array, check_choice, check_range, is_concrete, target_note, warn_user
-from ..description import Robot
-from ..inputs import Actuation, Loads, gravity_vector
+from ..inputs import Actuation, gravity_vector
 from ..solve import problem
 from .objectives import KINDS, SHORTHANDS
 from .options import IKOptions
@@ -24,7 +22,6 @@ from .problem import (
     Problem,
     Target,
     _split,
-    _tip_force,
     describe_task,
     scaled_inputs,
 )
@@ -49,23 +46,15 @@ def _problem(
     """Checks the arguments; returns (Problem, Plan, start v0, start unknowns (NaN))."""
     if not isinstance(target, Target):
         target = Target(target)
-    is_general = isinstance(robot, Robot)
     batched = jnp.ndim(target.position) == 2
-    n_t, n_tubes = robot.n_tendons, robot.n_tubes if is_general else 1
+    robot, base, load = problem(robot, guess, load, solver, batch=batched)
+    if load.scene is not None:
+        raise ValueError(
+            "load.scene is set: inverse kinematics with obstacles is not supported yet (the contact forces would be "
+            "more unknowns in every IK step); solve the forward problem with tdct.solve(..., scene=...)"
+        )
+    n_t, n_tubes = robot.n_tendons, robot.n_tubes
     L = float(robot.length) if is_concrete(robot.length) else robot.length
-    if is_general:
-        load = Loads.of(load)
-        if load.scene is not None:
-            raise ValueError(
-                "load.scene is set: inverse kinematics with obstacles is not supported yet (the contact forces would be "
-                "more unknowns in every IK step); solve the forward problem with tdct.solve(..., scene=...)"
-            )
-        base = Actuation(np.zeros(n_t), np.zeros(n_tubes)) if guess is None else Actuation.of(guess, n_tubes)
-        general.check_arguments(robot, base, load, solver)
-    else:
-        load = Loads() if load is None else load
-        base = Actuation(np.zeros(n_t)) if guess is None else guess
-        check_inputs(robot, base, load, solver, batch=batched)
     typed = tendons
     if tendons is None:
         tendons = tuple(range(1, n_t + 1))
@@ -75,20 +64,19 @@ def _problem(
         tendons = tuple(tendons)
     for t in tendons if isinstance(tendons, tuple) else (None,):
         if isinstance(t, bool) or not isinstance(t, (int, np.integer)) or not 1 <= t <= n_t:
-            where = f"tendons[0] to tendons[{n_t - 1}] of the robot" if is_general else "tendon 1 at body +y"
-            raise ValueError(f"tendons = {typed!r}: a tendon number or a sequence of them, each in [1, {n_t}] ({where})")
+            raise ValueError(
+                f"tendons = {typed!r}: a tendon number or a sequence of them, each in [1, {n_t}] "
+                f"(tendons[0] to tendons[{n_t - 1}] of the robot)"
+            )
     if len(set(tendons)) != len(tendons):
         raise ValueError(f"tendons = {tendons!r} names a tendon twice")
-    tubes = _free_tubes(tubes, insertion, n_tubes, is_general)
+    tubes = _free_tubes(tubes, insertion, n_tubes)
     if insertion is not None:
-        shape = (n_tubes,) if is_general and np.ndim(insertion) == 1 else ()
+        shape = (n_tubes,) if np.ndim(insertion) == 1 else ()
         insertion = as_array("insertion", insertion, shape, unit=" m")
         check_range("insertion", insertion, 0.0, L, unit=f" m (0 to the robot length {float(L):g} m)") if is_concrete(L) else None
-        if is_general:
-            depths = jnp.broadcast_to(insertion, (n_tubes,))
-            base = Actuation._rebuild(base.tensions, depths, base.displacements, base.driven)
-        else:
-            base = Actuation(base.tensions, insertion)
+        depths = jnp.broadcast_to(insertion, (n_tubes,))
+        base = Actuation._rebuild(base.tensions, depths, base.displacements, base.driven)
     if not tendons and not tubes:
         raise ValueError("nothing is free: give at least one free tendon (tendons=) or leave a tube's insertion free")
     if not isinstance(bounds, Bounds):
@@ -125,11 +113,10 @@ def _problem(
             warn_user(note, UnitWarning)
     free = len(tendons) + len(tubes)
     if objective is not None and free <= target.size:
-        inputs = (
-            f"tendons {tendons}, tubes {tuple(t + 1 for t in tubes)}"
-            if is_general
-            else (f"tendons {tendons}{'; the insertion fixed' if not tubes else ' and the insertion'}")
-        )
+        if n_tubes == 1:  # one tube (the paper's robot): the insertion
+            inputs = f"tendons {tendons}{' and the insertion' if tubes else '; the insertion fixed'}"
+        else:
+            inputs = f"tendons {tendons}, tubes {tuple(t + 1 for t in tubes)}"
         raise ValueError(
             f"objective = {getattr(objective, '__name__', objective)!r}: nothing to choose: {free} free input(s) "
             f"({inputs}) for {target.size} task "
@@ -170,20 +157,16 @@ def _default_starts(prob: Problem, plan: Plan):
     program (op by op it would compile each of its few dozen operations on first use)."""
     positions = prob.target.position
     if jnp.ndim(positions) == 2:
-        forces = jnp.broadcast_to(_tip_force(prob.load), jnp.shape(positions))
+        forces = jnp.broadcast_to(prob.load.tip_force, jnp.shape(positions))
         return jax.vmap(lambda p, f: default_start(prob, plan, p, f))(positions, forces)
-    return default_start(prob, plan, positions, _tip_force(prob.load))
+    return default_start(prob, plan, positions, prob.load.tip_force)
 
 
-def _free_tubes(tubes, insertion, n_tubes: int, is_general: bool) -> tuple:
+def _free_tubes(tubes, insertion, n_tubes: int) -> tuple:
     """The free tubes, 0-based, from ``tubes=`` (numbered from 1; default all unless ``insertion``
     fixes them)."""
     if tubes is None:
         return () if insertion is not None else tuple(range(n_tubes))
-    if not is_general:
-        raise ValueError(
-            f"tubes = {tubes!r}: a tdct.Robot's one tube is free unless insertion= fixes it; tubes= is for a Robot"
-        )
     if insertion is not None:
         raise ValueError(f"tubes = {tubes!r} and insertion = {insertion!r}: give one (insertion= fixes every tube)")
     typed = tubes
@@ -208,28 +191,27 @@ def _free_tubes(tubes, insertion, n_tubes: int, is_general: bool) -> tuple:
 
 
 def _input_bounds(robot, base, plan: Plan, bounds: Bounds, ins_bounds, scale):
-    """Bounds (lo, hi) of v: tensions over ``scale`` (each capped by its tendon's ``max_tension``
-    on a Robot), displacements over DISPLACEMENT_SCALE L, insertions over L."""
+    """Bounds (lo, hi) of v: tensions over ``scale`` (each capped by its tendon's ``max_tension``),
+    displacements over DISPLACEMENT_SCALE L, insertions over L."""
     L, k = robot.length, len(plan.tendons)
     lo, hi = [bounds.tension[0] / scale] * k, [bounds.tension[1] / scale] * k
-    if isinstance(robot, Robot):
-        pulled, moved, _ = _split(base, plan)
-        for j in pulled:
-            cap = robot.tendons[plan.tendons[j]].max_tension
-            if cap is None:
-                continue
-            if is_concrete(cap) and is_concrete(bounds.tension) and float(cap) < float(bounds.tension[0]):
-                i = plan.tendons[j]
-                raise ValueError(
-                    f"tendons[{i}].max_tension = {float(cap):g} N is below bounds.tension's lowest "
-                    f"{float(bounds.tension[0]):g} N: lower bounds.tension or free another tendon"
-                )
-            hi[j] = array_module(cap, bounds.tension).minimum(bounds.tension[1], cap) / scale
-        if moved:
-            width = DISPLACEMENT_SCALE * L
-            d_lo, d_hi = (-width, width) if bounds.displacement is None else bounds.displacement
-            for j in moved:
-                lo[j], hi[j] = d_lo / width, d_hi / width
+    pulled, moved, _ = _split(base, plan)
+    for j in pulled:
+        cap = robot.tendons[plan.tendons[j]].max_tension
+        if cap is None:
+            continue
+        if is_concrete(cap) and is_concrete(bounds.tension) and float(cap) < float(bounds.tension[0]):
+            i = plan.tendons[j]
+            raise ValueError(
+                f"tendons[{i}].max_tension = {float(cap):g} N is below bounds.tension's lowest "
+                f"{float(bounds.tension[0]):g} N: lower bounds.tension or free another tendon"
+            )
+        hi[j] = array_module(cap, bounds.tension).minimum(bounds.tension[1], cap) / scale
+    if moved:
+        width = DISPLACEMENT_SCALE * L
+        d_lo, d_hi = (-width, width) if bounds.displacement is None else bounds.displacement
+        for j in moved:
+            lo[j], hi[j] = d_lo / width, d_hi / width
     n = len(plan.tubes)
     lo, hi = lo + [ins_bounds[0] / L] * n, hi + [ins_bounds[1] / L] * n
     xp = array_module(*lo, *hi)

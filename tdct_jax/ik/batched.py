@@ -14,7 +14,7 @@ from .. import status
 from ..batch import Kernel, batch_solver, default_chunk_size, lanes_per_call, run_batched
 from ..checks import is_concrete
 from .driver import _solve_ik, rank
-from .problem import IKResult, Plan, Problem, _tip_force, scaled_inputs
+from .problem import IKResult, Plan, Problem, scaled_inputs
 from .reach import _where, no_model
 from .starts import STARTS
 
@@ -33,13 +33,13 @@ over 256 lanes 71 s, over 32 lanes 10 s (benchmarks/README.md)."""
 
 
 def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
-    """Many targets (a leading axis on ``prob.target``, and on ``prob.load`` when it has one).
-    With concrete values they run through the batch engine in chunks, each target from its first
-    start only; those that did not reach run again, each of their other starts in a lane of its
-    own of the same compiled program (``_retry``), so that a few hard targets do not hold up the
-    rest. Traced (inside the caller's jit or vmap): one vmap, every start."""
-    loads = jnp.ndim(_tip_force(prob.load)) == 2
-    per = (prob.target, prob.load if loads else None)
+    """Many targets (a leading axis on ``prob.target``, and on the load's tip force and moment when
+    it has one). With concrete values they run through the batch engine in chunks, each target from
+    its first start only; those that did not reach run again, each of their other starts in a lane
+    of its own of the same compiled program (``_retry``), so that a few hard targets do not hold up
+    the rest. Traced (inside the caller's jit or vmap): one vmap, every start."""
+    loads = jnp.ndim(prob.load.tip_force) == 2
+    per = (prob.target, (prob.load.tip_force, prob.load.tip_moment) if loads else None)
     if not all(is_concrete(x) for x in jax.tree.leaves((prob, v0))):
         return jax.vmap(lambda per, v: _solve_ik(_one(prob, per), v, wrench0, plan)[0])(per, v0)
     leaves, tree = jax.tree.flatten(per)
@@ -47,7 +47,9 @@ def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
     points = {f"in{i}": np.asarray(leaves[i]) for i in own} | {"v0": np.asarray(v0)}
     kernel = Kernel(_ik_point, (("plan", plan), ("tree", tree), ("own", own)))
     prob = prob._replace(solver=batch_solver(prob.solver))
-    base = (prob._replace(target=None, load=None if loads else prob.load), wrench0, leaves)
+    # the load's other fields are shared: the base holds them (the tip's, the first target's, replaced)
+    load = prob.load._with(tip_force=prob.load.tip_force[0], tip_moment=prob.load.tip_moment[0]) if loads else prob.load
+    base = (prob._replace(target=None, load=load), wrench0, leaves)
     chunk = CHUNK_SIZE if jax.default_backend() == "cpu" else default_chunk_size()
     n = len(v0)
     out = run_batched(kernel, base, points | _tries(np.zeros(n, np.int32)), chunk_size=chunk, progress=False)
@@ -118,9 +120,11 @@ first call)."""
 
 
 def _one(prob: Problem, per) -> Problem:
-    """The problem of one target of a batch: its target, and its load where each has its own."""
-    target, load = per
-    return prob._replace(target=target, load=prob.load if load is None else load)
+    """The problem of one target of a batch: its target, and its tip force and moment where each
+    has its own (the Loads' only fields with batch axes)."""
+    target, tip = per
+    load = prob.load if tip is None else prob.load._with(tip_force=tip[0], tip_moment=tip[1])
+    return prob._replace(target=target, load=load)
 
 
 def _ik_point(base, point, kernel: Kernel) -> dict:

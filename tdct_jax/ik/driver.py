@@ -15,12 +15,12 @@ from jax import lax
 from .. import status
 from ..inputs import Actuation
 from ..newton import lazily
+from ..roots import root
 from ..shooting import (
     RootInfo,
     at_root,
     force_scale,
     jacobians_at_root,
-    root,
     root_in_inputs,
     scaled,
     tip_compliance,
@@ -301,8 +301,7 @@ def _solve_ik(prob: Problem, v0, wrench0, plan: Plan, *, tries=(0, STARTS), mode
             jacobians = jacobians_at_root(*problem, prob.solver, x, jacobians)
         J_res, (J_p, J_R) = jacobians
         C = tip_compliance(prob.robot, sol.tip_rotation, J_res, J_p, J_R, force_scale(*problem))
-    if isinstance(act, Actuation):  # the driven tendons' tensions as found
-        act = Actuation._rebuild(sol.tensions, act.insertions, act.displacements, act.driven)
+    act = Actuation._rebuild(sol.tensions, act.insertions, act.displacements, act.driven)  # the driven tensions found
     position, orientation = pose_errors(sol.tip_position, sol.tip_rotation, prob.target)
     phi = jnp.nan if plan.objective is None else objective_value(sol, C, act, prob, plan)
     code = jnp.where(sol.result == status.SUCCESS, found.code, sol.result).astype(jnp.int32)

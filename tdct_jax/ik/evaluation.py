@@ -9,10 +9,10 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from .. import general
-from ..inputs import Actuation
+from .. import rod
 from ..integrate import coupled
-from ..shooting import RootInfo, at_root, force_scale, load_columns, root, scaled, shoot, tip_compliance, unscaled
+from ..roots import root
+from ..shooting import RootInfo, at_root, force_scale, load_columns, scaled, shoot, tip_compliance, unscaled
 from ..solve import solution_and_compliance
 from .objectives import objective_value
 from .problem import Plan, Problem, _wrench, actuation_of, task_residual
@@ -95,9 +95,7 @@ def _one_pass(x, v, F_c, prob: Problem, plan: Plan, taken=None):
         return e, G, stiffness(C), _along(stiffness, (C,), (dC,), (2,))
 
     def objective(z):
-        act = actuation_of(z[n:], prob, plan)
-        if isinstance(act, Actuation):  # the driven tensions found
-            act = general.with_driven(act, z[:n], F_c)
+        act = rod.with_driven(actuation_of(z[n:], prob, plan), z[:n], F_c)  # the driven tensions found
         return objective_value(None, None, act, prob, plan)
 
     return e, G, objective(z), _along(objective, (z,), (D,), (1,))
@@ -142,7 +140,7 @@ def _through_solution(v, guess, prob: Problem, plan: Plan) -> Evaluation:
         sol = solution_and_compliance(*problem, guess, prob.solver)[0]
         x, code = scaled(prob.robot, _wrench(sol, act), F_c), sol.result
         e = task_residual(sol.tip_position, sol.tip_rotation, prob.target, prob.robot.length)
-        pulled = general.with_driven(act, x, F_c) if isinstance(act, Actuation) else act  # the driven tensions found
+        pulled = rod.with_driven(act, x, F_c)  # the driven tensions found
         phi = objective_value(sol, None, pulled, prob, plan)
         return (e, phi), (e, phi, unscaled(prob.robot, x, F_c), code)
 

@@ -63,6 +63,5 @@ def objective_value(sol: Solution, C, act: Actuation, prob: Problem, plan: Plan)
     if plan.objective == "tension":
         return jnp.sum(jnp.asarray(act.tensions) ** 2)
     if plan.objective == "insertion":
-        insertion = act.insertion if isinstance(act, Actuation) else act.insertions[0]  # one tube (checked)
-        return (insertion - prob.preferred_insertion) ** 2
+        return (act.insertions[plan.tubes[0]] - prob.preferred_insertion) ** 2  # one free tube (checked)
     return plan.objective(sol, act)

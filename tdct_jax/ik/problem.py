@@ -86,11 +86,11 @@ class Bounds:
     """Physical bounds on the inputs: tendons only pull, the tube stays inside the robot.
 
     Attributes:
-        tension: (lowest, highest) tension of every free tendon [N], 0 <= lowest <= highest; on a
-            Robot a tendon's own ``max_tension`` lowers its highest.
+        tension: (lowest, highest) tension of every free tendon [N], 0 <= lowest <= highest; a
+            tendon's own ``max_tension`` lowers its highest.
         insertion: (shallowest, deepest) insertion of every free tube [m] in [0, L]; None: (0, L).
-        displacement: (lowest, highest) displacement of every free displacement-driven tendon of a
-            Robot [m]; None: (-L / 10, L / 10).
+        displacement: (lowest, highest) displacement of every free displacement-driven tendon [m];
+            None: (-L / 10, L / 10).
     """
 
     tension: tuple = (0.0, 10.0)
@@ -115,9 +115,9 @@ DEFAULT_BOUNDS = Bounds()
 
 
 class Plan(NamedTuple):
-    """What is free (static): which tendons and which tubes (0-based; a ``Robot``'s one tube is
-    tube 0, its insertion), which objective. v holds the free tendons' scaled tensions (or, for a
-    Actuation's ``driven`` tendons, scaled displacements) in this order, then the tubes'."""
+    """What is free (static): which tendons and which tubes (0-based; the paper robot's one tube
+    is tube 0, its insertion), which objective. v holds the free tendons' scaled tensions (or, for
+    the Actuation's ``driven`` tendons, scaled displacements) in this order, then the tubes'."""
 
     tendons: tuple
     tubes: tuple
@@ -130,9 +130,8 @@ class IKResult:
     """Outcome of ``inverse_kinematics``.
 
     Attributes:
-        actuation: the tensions [N] and insertion [m] found (every bound holds); for a
-            Robot a Actuation, its tensions those of the solution (the driven
-            tendons' included).
+        actuation: the tensions [N] and insertions [m] found (every bound holds), an
+            Actuation whose tensions are those of the solution (the driven tendons' included).
         solution: the forward Solution there (``solution.tip_position`` etc.).
         position_error: distance from the tip to the target position (over ``target.axes``) [m].
         orientation_error: angle between tip and target orientation [rad] (0 without one).
@@ -169,11 +168,11 @@ class IKResult:
 class Problem(NamedTuple):
     """Everything an IK step needs besides the free inputs v (a pytree; ``plan`` is static)."""
 
-    robot: Robot | Robot
+    robot: Robot
     target: Target
-    load: TipLoad | Loads  # Loads for a Robot
+    load: Loads
     gravity: jax.Array
-    base: Actuation | Actuation  # values of the fixed inputs, by the robot's kind
+    base: Actuation  # values of the fixed inputs
     lo: jax.Array  # bounds of v
     hi: jax.Array
     tension_scale: jax.Array  # [N] per unit of v
@@ -189,23 +188,16 @@ DISPLACEMENT_SCALE = 0.1
 
 def _split(base, plan: Plan):
     """Static positions in v of the free tendons driven by tension and of those driven by
-    displacement (a Actuation's ``driven``), with the latter's places in ``displacements``."""
-    driven = getattr(base, "driven", ())
+    displacement (the Actuation's ``driven``), with the latter's places in ``displacements``."""
+    driven = base.driven
     pulled = tuple(j for j, t in enumerate(plan.tendons) if t not in driven)
     moved = tuple(j for j, t in enumerate(plan.tendons) if t in driven)
     return pulled, moved, tuple(driven.index(plan.tendons[j]) for j in moved)
 
 
 def actuation_of(v, prob: Problem, plan: Plan):
-    """The actuation (an Actuation, or a Actuation for a Robot) with the free inputs
-    set from the scaled v."""
+    """The Actuation with the free inputs set from the scaled v."""
     k, base, L = len(plan.tendons), prob.base, prob.robot.length
-    if isinstance(base, Actuation):
-        tensions = jnp.asarray(base.tensions)
-        if k:
-            tensions = tensions.at[jnp.asarray(plan.tendons)].set(v[:k] * prob.tension_scale)
-        insertion = v[k] * L if plan.tubes else jnp.asarray(base.insertion)
-        return Actuation(tensions, insertion)
     pulled, moved, places = _split(base, plan)
     tensions, insertions, displacements = (jnp.asarray(x, float) for x in (base.tensions, base.insertions, base.displacements))
     if pulled:
@@ -221,11 +213,6 @@ def actuation_of(v, prob: Problem, plan: Plan):
 def scaled_inputs(act, prob: Problem, plan: Plan):
     """The inverse of ``actuation_of``: v of an actuation."""
     L = prob.robot.length
-    if isinstance(act, Actuation):
-        v = [jnp.asarray(act.tensions)[jnp.asarray(plan.tendons)] / prob.tension_scale] if plan.tendons else []
-        if plan.tubes:
-            v.append(jnp.reshape(act.insertion / L, (1,)))
-        return jnp.concatenate(v) if v else jnp.zeros(0)
     pulled, moved, places = _split(act, plan)
     v = jnp.zeros(len(plan.tendons) + len(plan.tubes))
     if pulled:
@@ -240,16 +227,11 @@ def scaled_inputs(act, prob: Problem, plan: Plan):
 
 
 def _wrench(sol, act):
-    """The shooting unknowns of a Solution, unscaled: its base wrench, then (a Robot's)
-    the displacement-driven tendons' tensions [N]."""
-    if getattr(act, "driven", ()):
+    """The shooting unknowns of a Solution, unscaled: its base wrench, then the
+    displacement-driven tendons' tensions [N]."""
+    if act.driven:
         return jnp.concatenate([sol.base_wrench, sol.tensions[np.array(act.driven)]])
     return sol.base_wrench
-
-
-def _tip_force(load):
-    """The tip force [N] of a TipLoad or Loads."""
-    return load.force if isinstance(load, TipLoad) else load.tip_force
 
 
 def task_residual(p, R, target: Target, L):

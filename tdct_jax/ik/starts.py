@@ -10,19 +10,21 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+from .. import rod
+from ..description import Robot, channelled_second_moments, section_area
 from ..inputs import Actuation
 from ..shooting import force_scale, shoot, straight_rod
-from .problem import Plan, Problem, _tip_force, actuation_of, scaled_inputs, task_residual
+from .problem import Plan, Problem, actuation_of, scaled_inputs, task_residual
 
 
 def default_start(prob: Problem, plan: Plan, p, force):
     """A start from the target position p [m] alone: the circular arc from the base (tangent +z)
     through p, less the sag that the tip force [N] and the robot's weight would cause on their own
     (a linear cantilever estimate), fixes a bending angle; the tendons on that side pull with the
-    tension whose moment bends the silicone so far, no tube. A Robot: its first section's
-    stiffness and density, every tendon as if anchored at the tip; free displacement-driven tendons
-    start at the displacement ``prob.base`` gives."""
-    robot = prob.robot
+    tension whose moment bends the first section so far, no tube: its stiffness and density with
+    the tendon channels (``_arc_parameters``), every tendon as if anchored at the tip; free
+    displacement-driven tendons start at the displacement ``prob.base`` gives."""
+    robot, base = prob.robot, prob.base
     L, (EI, rho, angles, offsets) = robot.length, _arc_parameters(robot)
     sag = (force * L**3 / 3 + rho * prob.gravity * L**4 / 8) / EI
     sag = sag * jnp.minimum(1.0, 0.5 * L / jnp.maximum(jnp.linalg.norm(sag[:2]), 1e-300))
@@ -31,32 +33,23 @@ def default_start(prob: Problem, plan: Plan, p, force):
     share = jnp.maximum(jnp.cos(angles - jnp.arctan2(y, x)), 0.0)
     tensions = angle / L * EI * share / jnp.maximum(jnp.sum(share**2), 1e-12) / offsets
     k = len(plan.tendons)
-    if isinstance(prob.base, Actuation):
-        v = [tensions[jnp.asarray(plan.tendons)] / prob.tension_scale] if plan.tendons else []
-        if plan.tubes:
-            v.append(jnp.reshape(prob.lo[-1], (1,)))
-        v = jnp.concatenate(v)
-    else:
-        base = prob.base
-        v = scaled_inputs(Actuation._rebuild(tensions, base.insertions, base.displacements, base.driven), prob, plan)
-        v = v.at[k:].set(prob.lo[k:])
+    v = scaled_inputs(Actuation._rebuild(tensions, base.insertions, base.displacements, base.driven), prob, plan)
+    v = v.at[k:].set(prob.lo[k:])
     return jnp.clip(v, prob.lo, prob.hi)
 
 
-def _arc_parameters(robot):
+def _arc_parameters(robot: Robot):
     """(bending stiffness [N m^2], linear density [kg/m], tendon angles [rad], offsets [m]) for
-    ``default_start``: a Robot's silicone, a Robot's first section (no channels)."""
-    if isinstance(robot, Robot):
-        return (
-            robot.bending_stiffness(False)[0],
-            robot.linear_density(False),
-            jnp.asarray(robot.tendon_angles),
-            robot.tendon_offset,
-        )
-    sec = robot.sections[0]
-    D, d = sec.outer_diameter, sec.inner_diameter
-    angles, offsets = (jnp.stack([jnp.asarray(getattr(t, k), float) for t in robot.tendons]) for k in ("angle", "offset"))
-    return sec.E * jnp.pi / 64 * (D**4 - d**4), sec.density * jnp.pi / 4 * (D**2 - d**2), angles, jnp.maximum(offsets, 1e-300)
+    ``default_start``: the first section's about body x, every tendon's channel cut from it (as
+    the shooting's first interval has them, without a tube: ``rod.interval_parameters``)."""
+    sec, n_t = robot.sections[0], robot.n_tendons
+    r, _ = rod.tendon_positions(robot, 0.0)
+    I_x, _ = channelled_second_moments(sec.outer_diameter, sec.inner_diameter, sec.tendon_channel_diameter, r, 1.0)
+    angles, offsets = (
+        jnp.stack([jnp.asarray(getattr(t, k), float) for t in robot.tendons]) if n_t else jnp.zeros(0)
+        for k in ("angle", "offset")
+    )
+    return sec.E * I_x, sec.density * section_area(sec, n_t), angles, jnp.maximum(offsets, 1e-300)
 
 
 def starts(v0, prob: Problem, plan: Plan):
@@ -71,7 +64,7 @@ def starts(v0, prob: Problem, plan: Plan):
         return v.at[k:].set(lo[k:] + where * (hi[k:] - lo[k:])) if plan.tubes else v
 
     quarter = lo + 0.25 * (hi - lo)
-    arc = default_start(prob, plan, prob.target.position, _tip_force(prob.load))
+    arc = default_start(prob, plan, prob.target.position, prob.load.tip_force)
     return jnp.stack(
         [v0, with_insertion(lo, 0.0), with_insertion(lo, 1.0), with_insertion(quarter, 0.5), with_insertion(arc, 1.0)]
     )

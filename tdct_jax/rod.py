@@ -1,5 +1,5 @@
-"""Shooting on a ``Robot``: breakpoints, intervals, the integration across them, the node
-quantities (docs/model.md; issue 23).
+"""A robot's breakpoint intervals: the integration plan, the integration across them, the shooting
+residual and the node quantities (docs/model.md).
 
 The state is segments.py's (p, R, N, M), N and M the *total* force and moment of rod plus tendons.
 Along s the segment parameters change only at breakpoints:
@@ -20,8 +20,10 @@ that begins at s_p (or, at s_p = L, before the tip condition N(L) = F_e, M(L) = 
 
 Helical tendons: r_t(s) turns with the twist rate, so the tendon tangent is pb_t = u x r_t + r_t' + v;
 s rides in the state (s' = 1) so that every RK4 stage sees its own r_t(s). Where no tendon has a
-twist (``Tendon.twist`` None, static) r_t is constant and s is not carried: the paper's robot
-through this path then costs what it costs through ``Robot``'s.
+twist (``Tendon.twist`` None, static) r_t is constant and s is not carried.
+
+The paper's printed variants (``SolverOptions``: transition "paper", tendon_model "paper") act
+where the first tube is inside and at its end (``Paper``).
 
 Multiple shooting (multiple.py) cuts the same RK4 steps into K intervals of equal step count
 (``pieces``), each integrated from its own start by ``integrate``.
@@ -41,7 +43,19 @@ from .checks import check_range, is_concrete
 from .description import Robot, channelled_second_moments, is_concrete_tree, section_area
 from .inputs import Actuation, Loads
 from .integrate import coupled, rk4
-from .segments import E3, Segment, State, carried, paper_transition, printed_moment, rod_force, strains, strains_at, tendon_pb, uncarried
+from .segments import (
+    E3,
+    Segment,
+    State,
+    carried,
+    paper_transition,
+    printed_moment,
+    rod_force,
+    strains,
+    strains_at,
+    tendon_pb,
+    uncarried,
+)
 
 
 class Interval(NamedTuple):
@@ -207,7 +221,7 @@ def plan(robot: Robot, act: Actuation, load: Loads, gravity) -> Plan:
 
 
 def force_scale(robot: Robot, act: Actuation, load: Loads, gravity):
-    """A typical force F_c [N] (shooting.force_scale for a Robot): tensions, tip load,
+    """A typical force F_c [N] that scales unknowns and residual: tensions, tip load,
     weight, point loads and distributed force. A constant for differentiation."""
     robot, act, load, gravity = lax.stop_gradient((robot, act, load, gravity))
     L = robot.length
@@ -247,7 +261,7 @@ def straight_rod(robot: Robot, act: Actuation, load: Loads, gravity, F_c, steps:
     arms = s_p[:, None] * E3[None]
     M0 = M0 + jnp.sum(load.point_moment + jnp.cross(arms, load.point_force), 0) + jnp.cross(E3, load.distributed_force) * L**2 / 2
     guesses = jnp.asarray(act.tensions, float)[np.asarray(act.driven, int)]  # the driven tendons' given tensions
-    forces = jnp.zeros(0 if steps is None else contact.n_unknowns(robot, load, steps))  # contact free
+    forces = jnp.zeros(0 if steps is None else n_contact_unknowns(robot, load, steps))  # contact free
     return jnp.concatenate([N0 / F_c, M0 / (F_c * L), guesses / F_c, forces])
 
 
@@ -309,6 +323,13 @@ def n_intervals(robot: Robot, load: Loads) -> int:
     return len(robot.sections) + robot.n_tubes + anchored + load.n_points + len(robot.masses)
 
 
+def n_contact_unknowns(robot: Robot, load: Loads, steps: int) -> int:
+    """Contact unknowns (one force per candidate and obstacle) of ``load.scene``, 0 without one."""
+    if load.scene is None:
+        return 0
+    return contact.n_candidates(n_intervals(robot, load), steps, load.scene.every) * load.scene.n_obstacles
+
+
 def check_intervals(robot: Robot, load: Loads, solver) -> None:
     """Raises unless the shooting intervals K divide the P steps RK4 steps (P: ``n_intervals``),
     naming ``intervals``, its value and the allowed values."""
@@ -316,7 +337,7 @@ def check_intervals(robot: Robot, load: Loads, solver) -> None:
     if (P * n) % K:
         allowed = [k for k in range(1, P * n + 1) if (P * n) % k == 0]
         raise ValueError(
-            f"intervals = {K}: a Robot with {P} breakpoint intervals of steps = {n} RK4 steps each is split into "
+            f"intervals = {K}: a robot with {P} breakpoint intervals of steps = {n} RK4 steps each is split into "
             f"K intervals of equal step count, so K must divide {P} x {n} = {P * n}: one of {allowed} "
             f"(every breakpoint an interval boundary for K = {P} q, q dividing {n})"
         )
@@ -393,7 +414,9 @@ def integrate(
             seg = segment(P, c.s)
             dy, v, u = rate(seg, c.y)
             if printed:  # the printed tendon model where a tube is inside
-                dy, v, u = jax.tree.map(lambda a, b: jnp.where(P.backbone > 0, a, b), rate(segment(P, c.s, False), c.y), (dy, v, u))
+                dy, v, u = jax.tree.map(
+                    lambda a, b: jnp.where(P.backbone > 0, a, b), rate(segment(P, c.s, False), c.y), (dy, v, u)
+                )
             dl = None
             if lengths:
                 dl = P.present * jnp.linalg.norm(tendon_pb(seg, v, u), axis=-1)
@@ -506,7 +529,9 @@ def shoot(robot: Robot, act: Actuation, load: Loads, gravity, solver, x, F_c, pa
         where = contact.interior_pieces(P, solver.steps, g, scene.every)
         lam = x[6 + n_d :].reshape(-1, scene.n_obstacles) * F_c
         forces = jnp.zeros((ps.h.size, scene.n_obstacles)).at[where].set(lam[:-1])
-    end, out = integrate(robot, load, gravity, ps, Carry(y0, None, l0), g, path, forces, solver.rotation, paper_variants(solver, pl))
+    end, out = integrate(
+        robot, load, gravity, ps, Carry(y0, None, l0), g, path, forces, solver.rotation, paper_variants(solver, pl)
+    )
     nodes, starts = (out, None) if scene is None else out
     if scene is not None:
         # a candidate inside a zero-length interval shares its point with the next one: off
@@ -544,7 +569,9 @@ def node_quantities(robot: Robot, act, load, gravity, nodes, pl: Plan, tendon_mo
             return (v, u, *rod_force(seg, y, v, u))
 
         if tendon_model == "paper":
-            return jax.tree.map(lambda a, b: jnp.where(P.backbone > 0, a, b), at(_segment(robot, P, s, False)), at(_segment(robot, P, s)))
+            return jax.tree.map(
+                lambda a, b: jnp.where(P.backbone > 0, a, b), at(_segment(robot, P, s, False)), at(_segment(robot, P, s))
+            )
         return at(_segment(robot, P, s))
 
     # lax.map, not vmap: see solve._assemble
