@@ -52,7 +52,7 @@ def main() -> None:
     args = parser.parse_args()
     repeats = 20 if args.quick else args.repeats
     if args.general:
-        return compare_general(args, repeats, [int(k) for k in args.rod.split(",")])
+        return compare_general(args, repeats, [int(k) for k in args.general.split(",")])
     if args.intervals:
         return compare_intervals(args, repeats, [int(k) for k in args.intervals.split(",")])
     out = Path(__file__).parent / "results" / f"latency{'_quick' if args.quick else ''}.json"

@@ -8,7 +8,7 @@ from .version import __version__ as __version__
 use_fast_compile_flags()
 jax.config.update("jax_enable_x64", True)
 
-from . import checks  # noqa: E402
+from . import checks, inputs  # noqa: E402
 from . import fields as fields  # noqa: E402
 from . import status as status  # noqa: E402
 from .calibrate import Calibration as Calibration  # noqa: E402
@@ -46,7 +46,6 @@ from .ik import track as track  # noqa: E402
 from .inputs import STANDARD_GRAVITY as STANDARD_GRAVITY  # noqa: E402
 from .inputs import Actuation as Actuation  # noqa: E402
 from .inputs import Loads as Loads  # noqa: E402
-from .inputs import TipLoad as TipLoad  # noqa: E402
 from .manipulation import Capacity as Capacity  # noqa: E402
 from .manipulation import Optimum as Optimum  # noqa: E402
 from .manipulation import capacity as capacity  # noqa: E402
@@ -86,11 +85,14 @@ from .status import ConvergenceError as ConvergenceError  # noqa: E402
 from .sweep import sweep as sweep  # noqa: E402
 from .sweep import sweep_chunks as sweep_chunks  # noqa: E402
 
-_RENAMED = {"Robot": ("Robot", Robot), "Actuation": ("Actuation", Actuation), "Solution": ("Solution", Solution)}
+_RENAMED = {"GeneralRobot": ("Robot", Robot), "GeneralActuation": ("Actuation", Actuation), "GeneralSolution": ("Solution", Solution)}
 
 
 def __getattr__(name):
-    """The former names of merged types (``tdct.Robot``): the merged type, warning once."""
+    """The former names of merged types (``tdct.GeneralRobot``): the merged type, warning once;
+    ``tdct.TipLoad``, which warns when called (it makes a ``Loads``)."""
+    if name == "TipLoad":
+        return inputs.TipLoad
     if name in _RENAMED:
         new, obj = _RENAMED[name]
         checks.deprecated(f"tdct.{name}", f"tdct.{new}")

@@ -483,13 +483,13 @@ def _write(plan: _Plan, out, chunk_size, progress, overwrite: bool, failures: _F
     return store.finish(path, head, flat, tail), False
 
 
-def sweep_chunks(robot=None, act=None, load=None, **options) -> Iterator[SweepChunk]:
+def sweep_chunks(robot=None, act=None, load=None, *, solver: SolverOptions = DEFAULT_SOLVER, **options) -> Iterator[SweepChunk]:
     """``sweep``'s results chunk by chunk, each yielded as soon as it is computed, so that host
     memory holds one chunk's outputs. After ``jax.distributed.initialize`` each process gets the
     chunks of its own part of the points. Failed points stay as result codes (no ``throw``).
 
     Args:
-        robot, act, load, **options: as for ``sweep``, with the same defaults (``out``,
+        robot, act, load, solver, **options: as for ``sweep``, with the same defaults (``out``,
             ``overwrite`` and ``throw`` excepted). Bad input raises here, before the first chunk.
 
     Returns:
@@ -502,7 +502,7 @@ def sweep_chunks(robot=None, act=None, load=None, **options) -> Iterator[SweepCh
     unknown = sorted(set(options) - set(defaults))
     if unknown:
         raise TypeError(f"sweep_chunks: unknown argument(s) {unknown}; allowed: {sorted(set(defaults) - set(_SWEEP_ONLY))}")
-    o = defaults | options
+    o = defaults | options | dict(solver=solver)
     plan = _plan(robot, act, load, **{k: v for k, v in o.items() if k not in ("chunk_size", "progress", *_SWEEP_ONLY)})
     return _chunks(plan, o["chunk_size"], o["progress"])
 

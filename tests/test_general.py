@@ -1,5 +1,4 @@
-"""The general robot description (issue 23): robot files, the paper's robot through the general
-path, closed forms (tendon anchored inside the body, point force on a cantilever, point mass),
+"""The one robot description: robot files, the paper's robot from its file, closed forms (tendon anchored inside the body, point force on a cantilever, point mass),
 equilibrium of every piece between breakpoints, and a two-segment six-tendon robot against an
 independent numpy/scipy implementation of the Rucker-Webster model.
 
@@ -131,21 +130,24 @@ def test_inputs_are_checked_against_the_robot(tmp_path):
         tdct.solve(robot, tdct.Actuation([1.0, 2.0], [0.1]), tdct.Loads(point_s=[0.5], point_force=[[0, 0, 1.0]]))
     with pytest.raises(ValueError, match="insertions"):
         tdct.solve(robot, tdct.Actuation([1.0, 2.0], [0.5]))
+    rod_only = tdct.Robot(0.3, (tdct.Section(end=0.3, outer_diameter=2e-3, E=1e9, nu=0.3, density=0.0),))
+    with pytest.raises(ValueError, match="the paper's variants act where a tube is inside .* this robot has no tube"):
+        tdct.solve(rod_only, solver=tdct.SolverOptions(transition="paper"))
 
 
-# ---- (a) the paper's robot through the general path --------------------------------------------
+# ---- (a) the paper's robot from its file --------------------------------------------------------
 
 PAPER_CASES = [((6.0, 0.0, 0.0, 1.0), 0.08, 0.02), ((3.0, 0.0, 0.0, 5.0), 0.0, 0.0), ((10.0, 0.0, 0.0, 0.0), 0.16, 0.05)]
 
 
 @pytest.mark.parametrize("tensions, insertion, mass", PAPER_CASES)
-def test_paper_robot_through_the_general_path(tensions, insertion, mass):
+def test_paper_robot_from_its_file_solves_as_the_preset(tensions, insertion, mass):
     act, load = tdct.Actuation(tensions, insertion), tdct.Loads.from_mass(mass)
     # one compiled program per robot: the Solution and the 6x6 compliance from the same solve
     C_ref, reference = compliance_and_solution(tdct.Robot.paper(), act, load)
-    C_gen, general = compliance_and_solution(tdct.Robot.from_toml(ROBOTS / "paper.toml"), act, load)
-    assert rel(rod.tip_position, reference.tip_position) < PAPER_TIP_RTOL
-    assert rel(rod.tip_rotation, reference.tip_rotation) < PAPER_TIP_RTOL
+    C_gen, from_file = compliance_and_solution(tdct.Robot.from_toml(ROBOTS / "paper.toml"), act, load)
+    assert rel(from_file.tip_position, reference.tip_position) < PAPER_TIP_RTOL
+    assert rel(from_file.tip_rotation, reference.tip_rotation) < PAPER_TIP_RTOL
     assert rel(C_gen, C_ref) < PAPER_COMPLIANCE_RTOL
     assert rel(C_gen[:3, :3], tdct.compliance(tdct.Robot.paper(), act, load)) < PAPER_COMPLIANCE_RTOL
 

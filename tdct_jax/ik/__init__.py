@@ -126,7 +126,7 @@ def inverse_kinematics(
     return result
 
 
-def track(robot: Robot, targets: Target, **options) -> IKResult:
+def track(robot: Robot, targets: Target, *, solver: SolverOptions = DEFAULT_SOLVER, **options) -> IKResult:
     """Inverse kinematics along a sequence of targets (a Target whose fields have a leading axis),
     each started from the last solution, as one compiled ``lax.scan``: the real-time control case.
     A warm update takes its first step from the last update's linearisation (``Model``: the
@@ -136,6 +136,7 @@ def track(robot: Robot, targets: Target, **options) -> IKResult:
     Args:
         robot, targets: the robot and the targets in order (at least one; a Target, or tip
             positions [m] of shape (n, 3)).
+        solver: SolverOptions for every forward solve.
         **options: as for ``inverse_kinematics`` (``guess`` starts the first step).
 
     Returns:
@@ -151,7 +152,7 @@ def track(robot: Robot, targets: Target, **options) -> IKResult:
     leaves, tree = jax.tree.flatten(targets)
     own = tuple(i for i, leaf in enumerate(leaves) if jnp.ndim(leaf) >= 1)  # the rest (weights) are shared
     first = jax.tree.unflatten(tree, [leaf[0] if i in own else leaf for i, leaf in enumerate(leaves)])
-    prob, plan, v0, wrench0 = _problem(**_arguments(robot, first, **options))
+    prob, plan, v0, wrench0 = _problem(**_arguments(robot, first, solver=solver, **options))
     result = _track(prob, leaves, v0, wrench0, plan, tree, own)
     _check(result, throw, prob.options.max_steps)
     return result
