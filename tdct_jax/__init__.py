@@ -85,7 +85,11 @@ from .status import ConvergenceError as ConvergenceError  # noqa: E402
 from .sweep import sweep as sweep  # noqa: E402
 from .sweep import sweep_chunks as sweep_chunks  # noqa: E402
 
-_RENAMED = {"GeneralRobot": ("Robot", Robot), "GeneralActuation": ("Actuation", Actuation), "GeneralSolution": ("Solution", Solution)}
+_RENAMED = {
+    "GeneralRobot": ("Robot", Robot),
+    "GeneralActuation": ("Actuation", Actuation),
+    "GeneralSolution": ("Solution", Solution),
+}
 
 
 def __getattr__(name):

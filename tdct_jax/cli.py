@@ -260,7 +260,9 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help="coarse grids; no Sec. V.A as inverse kinematics, stiffness map or parameter fit (about 1.5 minutes)",
     )
-    r.add_argument("--robot", metavar="robot.toml", help="robot file (docs/robot-file.md), a robot with a tube; default: the paper's robot")
+    r.add_argument(
+        "--robot", metavar="robot.toml", help="robot file (docs/robot-file.md), a robot with a tube; default: the paper's robot"
+    )
     r.add_argument("--quiet", action="store_true", help="no progress output")
     y = verbs.add_parser(
         "synth", parents=[described], help="write synthetic FBG-like shape files from the model", epilog=LISTS_HELP
