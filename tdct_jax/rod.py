@@ -205,9 +205,15 @@ def plan(robot: Robot, act: Actuation, load: Loads, gravity) -> Plan:
     zeros = jnp.zeros((first[4], 3))
     dN_all = jnp.concatenate([zeros, -F_p, jnp.zeros((1, 3))])
     dM_all = jnp.concatenate([zeros, -C_p, jnp.zeros((1, 3))])
-    order = jnp.argsort(b_all, stable=True)
-    rank = jnp.argsort(order, stable=True)
     n = b_all.size
+    if n <= 3:
+        # one breakpoint between base and tip (0 <= it <= L): the order is known, and the
+        # intervals' parameters do not depend on where it lies, so a batch of insertions shares
+        # them (as arrays without a batch axis: a sweep of the paper's robot 9% faster)
+        order = rank = np.arange(n)
+    else:
+        order = jnp.argsort(b_all, stable=True)
+        rank = jnp.argsort(order, stable=True)
     anchor_rank = jnp.full(robot.n_tendons, n, rank.dtype)
     if anchored:
         anchor_rank = anchor_rank.at[np.asarray(anchored)].set(rank[first[3] : first[4]])
@@ -402,15 +408,17 @@ def integrate(
         return _segment(robot, P, s, tilt) if helical else Segment(P.K_se, P.K_bt, P.rho, P.tau, r_fixed, P.backbone, tilt)
 
     def field(P: Interval):
+        dN = -P.rho * gravity - f_d  # N' = -f: weight and distributed force, constant along the piece
+
         def rate(seg: Segment, y):
             v, u = strains_at(seg, y)
             dp = y.world(v)
             dM = -jnp.cross(dp, y.N)
             if not seg.tilt:
                 dM = dM - y.world(printed_moment(seg, u))
-            return y.rate(dp, u, -P.rho * gravity - f_d, dM), v, u
+            return y.rate(dp, u, dN, dM), v, u
 
-        def f(_, c: Carry) -> Carry:
+        def f(c: Carry) -> Carry:
             seg = segment(P, c.s)
             dy, v, u = rate(seg, c.y)
             if printed:  # the printed tendon model where a tube is inside
@@ -445,7 +453,7 @@ def integrate(
         if f is not None:
             F, starts = contact.at_start(load.scene, f, y.p, k.P.radius)
             y = y._replace(N=y.N - F)
-        out = rk4(field(k.P), Carry(carried(y, rotation), k.s0 if helical else None, c.l), k.h[None], None, steps, project, path)
+        out = rk4(field(k.P), Carry(carried(y, rotation), k.s0 if helical else None, c.l), k.h, steps, project, path)
         end, nodes = out if path else (out, None)
         end, nodes = end._replace(y=uncarried(end.y)), None if nodes is None else nodes._replace(y=uncarried(nodes.y))
         return end._replace(s=None), nodes if f is None else (nodes, starts)
@@ -500,7 +508,7 @@ def closing(robot: Robot, act: Actuation, load: Loads, pl: Plan, y: State, lengt
     return jnp.concatenate(res), slack
 
 
-def shoot(robot: Robot, act: Actuation, load: Loads, gravity, solver, x, F_c, path: bool = False, mu=0.0):
+def shoot(robot: Robot, act: Actuation, load: Loads, gravity, solver, x, F_c, path: bool = False, mu=0.0, pl=None):
     """Integrates every interval from the scaled unknowns x to the tip: x[:6] the base wrench
     (N(0), M(0)), x[6:6 + n_d] the tensions of the displacement-driven tendons (act.driven) over
     F_c, then with ``load.scene`` the contact forces lambda / F_c, candidate by candidate, each
@@ -515,10 +523,13 @@ def shoot(robot: Robot, act: Actuation, load: Loads, gravity, solver, x, F_c, pa
         steps + 1, ...), both sides of each breakpoint, the node at an interval's start after that
         breakpoint's jump; the plan, actuation, tendon lengths, slack flags and the
         contact.Contact, None without a scene).
+
+    ``pl``: the ``plan`` of these inputs, where the caller has it (it does not depend on x
+    without displacement-driven tendons); None: made here.
     """
     scene, n_d = load.scene, len(act.driven)
     act = with_driven(act, x, F_c)
-    pl = plan(robot, act, load, gravity)
+    pl = plan(robot, act, load, gravity) if pl is None else pl
     ps, g = pieces(pl, solver.steps, 1, None if scene is None else scene.every)
     ps = jax.tree.map(lambda a: a[0], ps)
     y0 = State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:6] * F_c * robot.length)

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from . import status
+from . import rod, status
 from .contact import SMOOTHING
 from .description import Robot
 from .inputs import Actuation, Loads
@@ -99,9 +99,14 @@ def _single(robot: Robot, act: Actuation, load: Loads, gravity, guess, solver: S
     x0, x_straight = starts(robot, act, load, gravity, guess, F_c, solver.steps)
 
     def F_at(lam, mu=0.0):
+        # without displacement-driven tendons the plan does not depend on x: made once a load stage,
+        # not once a Newton step
+        staged = loads_at(act, load, gravity, lam)
+        pl = None if act.driven or inputs is not None else rod.plan(robot, *staged)
+
         def F(x, v=None):
-            act_lam, load_lam, gravity_lam = loads_at(act if v is None else inputs[0](v), load, gravity, lam)
-            res, tip = shoot(robot, act_lam, load_lam, gravity_lam, solver, x, F_c, mu=mu)
+            act_lam, load_lam, gravity_lam = staged if v is None else loads_at(inputs[0](v), load, gravity, lam)
+            res, tip = shoot(robot, act_lam, load_lam, gravity_lam, solver, x, F_c, mu=mu, pl=pl)
             return res, (tip.p, tip.R)
 
         return F
@@ -170,9 +175,10 @@ def quick_root(robot: Robot, act: Actuation, load: Loads, gravity, solver: Solve
     one Jacobian pass, then one integration per step, no load continuation. Not differentiable
     (``root`` is): the batch engine's first pass, whose unconverged lanes ``root`` solves again."""
     F_c = force_scale(robot, act, load, gravity)
+    pl = None if act.driven else rod.plan(robot, act, load, gravity)  # once, not once a step (``root``)
 
     def F(x):
-        res, tip = shoot(robot, act, load, gravity, solver, x, F_c)
+        res, tip = shoot(robot, act, load, gravity, solver, x, F_c, pl=pl)
         return res, (tip.p, tip.R)
 
     x, res, (p, R), steps, code = broyden(
