@@ -1,6 +1,8 @@
 """One way in: one SolverOptions object reaches every entry point; pytrees check user input when
 built, never when JAX rebuilds them."""
 
+import warnings
+
 import jax
 import numpy as np
 import pytest
@@ -68,3 +70,26 @@ def test_actuation_and_tip_load_take_a_leading_batch_axis(robot):
         tdct.Actuation(np.zeros((3, 4)), [[0.0], [0.1]])
     with pytest.raises(ValueError, match="one configuration is expected here"):
         tdct.solve(robot, act)
+
+
+def test_former_names_still_work_and_say_what_to_write(monkeypatch):
+    """Scripts written against the two models run: each former name gives the merged type, with
+    one FutureWarning naming what to write instead (CHANGELOG.md)."""
+    monkeypatch.setattr(tdct.checks, "_DEPRECATED", set())
+    with pytest.warns(FutureWarning, match=r"write tdct.Robot.paper\(\)"):
+        robot = tdct.Robot(E_silicone=1e6)
+    assert jax.tree.structure(robot) == jax.tree.structure(tdct.Robot.paper())
+    assert float(robot.sections[0].E) == 1e6
+    with pytest.warns(FutureWarning, match="write tdct.Loads"):
+        load = tdct.TipLoad(force=(0.0, -0.1, 0.0))
+    assert isinstance(load, tdct.Loads) and load.tip_force[1] == -0.1
+    with pytest.warns(FutureWarning, match="write tdct.Robot"):
+        assert tdct.GeneralRobot is tdct.Robot
+    with pytest.warns(FutureWarning, match="insertions"):
+        act = tdct.Actuation((1.0, 0.0, 0.0, 0.0), insertion=0.05)
+    np.testing.assert_array_equal(act.insertions, [0.05])
+    with pytest.warns(FutureWarning, match=r"'sections\[\*\]\.E'"):
+        assert robot.E_silicone == 1e6
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # once each: the second use is silent
+        tdct.Robot()
