@@ -200,6 +200,11 @@ class Loads:
         fields = {name: getattr(self, name) for name in self.__dataclass_fields__}
         return unchecked(Loads, **(fields | changes))
 
+    def with_tip(self, force, moment=None) -> Loads:
+        """The same loads with another tip force [N] (and moment [N m], default as they are),
+        unchecked: values may be traced or carry batch axes."""
+        return self._with(tip_force=force, tip_moment=self.tip_moment if moment is None else moment)
+
     def with_scene(self, scene) -> Loads:
         """The same loads with the obstacles ``scene`` (a checked Scene, or None)."""
         return self._with(scene=scene)

@@ -57,7 +57,7 @@ def _tip_height(robot, act, load, mass, depth, gravity, solver, guess=None):
     if depth is not None:
         insertions = jnp.asarray(act.insertions).at[..., 0].add(depth)
         act = Actuation._rebuild(act.tensions, insertions, act.displacements, act.driven)
-    load = load._with(tip_force=load.tip_force + mass * gravity)
+    load = load.with_tip(load.tip_force + mass * gravity)
     sol = solve(robot, act, load, gravity=gravity, solver=solver, guess=guess, throw=False)
     return sol.tip_position[1], sol
 

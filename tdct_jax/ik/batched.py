@@ -48,7 +48,7 @@ def _batched(prob: Problem, plan: Plan, v0, wrench0) -> IKResult:
     kernel = Kernel(_ik_point, (("plan", plan), ("tree", tree), ("own", own)))
     prob = prob._replace(solver=batch_solver(prob.solver))
     # the load's other fields are shared: the base holds them (the tip's, the first target's, replaced)
-    load = prob.load._with(tip_force=prob.load.tip_force[0], tip_moment=prob.load.tip_moment[0]) if loads else prob.load
+    load = prob.load.with_tip(prob.load.tip_force[0], prob.load.tip_moment[0]) if loads else prob.load
     base = (prob._replace(target=None, load=load), wrench0, leaves)
     chunk = CHUNK_SIZE if jax.default_backend() == "cpu" else default_chunk_size()
     n = len(v0)
@@ -123,7 +123,7 @@ def _one(prob: Problem, per) -> Problem:
     """The problem of one target of a batch: its target, and its tip force and moment where each
     has its own (the Loads' only fields with batch axes)."""
     target, tip = per
-    load = prob.load if tip is None else prob.load._with(tip_force=tip[0], tip_moment=tip[1])
+    load = prob.load if tip is None else prob.load.with_tip(tip[0], tip[1])
     return prob._replace(target=target, load=load)
 
 
