@@ -1,4 +1,6 @@
-"""The two Cosserat segments as pure vector fields (paper eqs. 1 and 23-30; docs/model.md).
+"""The Cosserat rod of rod plus tendons: its state, the constitutive relations solved for the
+strains, and the paper's printed terms (eqs. 1 and 23-36; docs/model.md); rod.py assembles the
+vector field from them, interval by interval.
 
 Both segments carry the same state: position p, rotation R (body to world), and the *total*
 internal force N = n + sum_t tau_t t_t and moment M = m + sum_t (R r_t) x tau_t t_t of rod plus
@@ -250,20 +252,6 @@ def rod_force(seg: Segment, y: State, v, u):
     n = y.N - y.R @ jnp.sum(f_t, 0)
     m = y.M - y.R @ jnp.sum(jnp.cross(seg.r, f_t), 0)
     return n, m
-
-
-def vector_field(seg: Segment, gravity):
-    """d/ds of the state (State or Carried) for one segment; ``gravity`` [m/s^2] in the world frame."""
-
-    def f(y: State | Carried):
-        v, u = strains_at(seg, y)
-        dp = y.world(v)
-        dM = -jnp.cross(dp, y.N)
-        if not seg.tilt:
-            dM = dM - y.world(printed_moment(seg, u))
-        return y.rate(dp, u, -seg.rho * gravity, dM)
-
-    return f
 
 
 def printed_moment(seg: Segment, u):
