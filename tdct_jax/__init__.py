@@ -49,8 +49,6 @@ from .inputs import Loads as Loads  # noqa: E402
 from .manipulation import Capacity as Capacity  # noqa: E402
 from .manipulation import Optimum as Optimum  # noqa: E402
 from .manipulation import capacity as capacity  # noqa: E402
-from .manipulation import insertion_optimum as insertion_optimum  # noqa: E402
-from .manipulation import load_capacity as load_capacity  # noqa: E402
 from .manipulation import optimal_insertion as optimal_insertion  # noqa: E402
 from .mechanics import Ellipsoid as Ellipsoid  # noqa: E402
 from .mechanics import compliance as compliance  # noqa: E402
@@ -92,11 +90,14 @@ _RENAMED = {
 }
 
 
+_WARN_WHEN_CALLED = {"TipLoad": "inputs", "load_capacity": "manipulation", "insertion_optimum": "manipulation"}
+
+
 def __getattr__(name):
     """The former names of merged types (``tdct.GeneralRobot``): the merged type, warning once;
-    ``tdct.TipLoad``, which warns when called (it makes a ``Loads``)."""
-    if name == "TipLoad":
-        return inputs.TipLoad
+    ``tdct.TipLoad``, ``tdct.load_capacity`` and ``tdct.insertion_optimum``, which warn when called."""
+    if name in _WARN_WHEN_CALLED:
+        return getattr(globals()[_WARN_WHEN_CALLED[name]], name)
     if name in _RENAMED:
         new, obj = _RENAMED[name]
         checks.deprecated(f"tdct.{name}", f"tdct.{new}")

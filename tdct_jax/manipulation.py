@@ -1,13 +1,14 @@
 """Object manipulation (paper Sec. V.A): tip load capacity (Fig. 14) and optimal insertion (Fig. 13).
 
-``capacity`` and ``insertion_optimum`` are pure JAX (jit, vmap; ``capacity`` also grad, by
-implicit differentiation of its root). ``load_capacity`` and ``optimal_insertion`` run them over
-grids in chunks with progress, like ``tdct.sweep``.
+One entry point per concept, like ``tdct.solve`` and ``tdct.sweep`` in one: ``capacity`` at one
+configuration, and ``optimal_insertion`` given a bracket, are pure JAX (jit, vmap; ``capacity``
+also grad, by implicit differentiation of its root); given a ``grid`` (or ``batch``), they run over
+it in chunks with progress, like ``tdct.sweep``. ``load_capacity`` and ``insertion_optimum`` are
+their former names.
 """
 
 from __future__ import annotations
 
-import inspect
 from functools import partial
 from time import perf_counter
 from typing import NamedTuple
@@ -19,7 +20,7 @@ from jax import lax
 
 from . import status
 from .batch import Kernel, batch_options
-from .checks import check_integer, is_concrete
+from .checks import check_integer, deprecated, is_concrete
 from .description import Robot
 from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
@@ -80,37 +81,62 @@ def _failed_solve(sol):
 
 
 def capacity(
-    robot: Robot,
-    act: Actuation,
+    robot: Robot | None = None,
+    act: Actuation | None = None,
     *,
+    grid=None,
+    batch=None,
     height: float = 0.0,
     height_tol: float = HEIGHT_TOL,
     max_steps: int = MAX_STEPS,
     gravity=STANDARD_GRAVITY,
     solver: SolverOptions = DEFAULT_SOLVER,
     throw: bool = True,
-) -> Capacity:
+    **batching,
+):
     """Load capacity (Fig. 14): the tip mass m at which the tip height y(L) falls to ``height`` [m].
 
     Safeguarded Newton on m with the exact derivative dy/dm from forward-mode autodiff; a
     bracket [lo, hi] with y(lo) > height >= y(hi) catches steps that overshoot or fail to
-    converge. The root is differentiable (``lax.custom_root``): d m / d(robot, act) comes from
-    the implicit function theorem, so robot parameters can be fitted to measured capacities.
+    converge. At one configuration the root is differentiable (``lax.custom_root``): d m /
+    d(robot, act) comes from the implicit function theorem, so robot parameters can be fitted to
+    measured capacities.
 
     Args:
-        robot, act: the robot and its actuation (the tip mass replaces any tip load).
+        robot, act: the robot and its actuation (the tip mass replaces any tip load); defaults
+            as for ``tdct.sweep``.
+        grid, batch: (optional) inputs to vary, as for ``tdct.sweep``; without them, one
+            configuration.
         height: target tip height y [m] (world frame, base at 0).
         height_tol: tolerance on the tip height [m] (the outer iteration's own).
         max_steps: most Newton steps on the mass.
         gravity: world gravity [m/s^2]; the tip mass weighs m * gravity.
         solver: SolverOptions for every solve.
         throw: raise ConvergenceError unless the result is SUCCESS (default, as everywhere),
-            also where the tip cannot reach ``height`` at all (UNREACHABLE).
+            also where the tip cannot reach ``height`` at all (UNREACHABLE); over a grid, after
+            the whole grid, naming the first such point.
+        **batching: over a grid or batch, ``tdct.sweep``'s chunk_size, progress and devices.
 
     Returns:
-        Capacity (mass [kg], reachable, iterations, result).
+        One configuration: Capacity (mass [kg], reachable, iterations, result), pure JAX.
+        A grid or batch: CapacityResult with those per point.
     """
-    robot, act, _ = problem(robot, act, Loads(), solver)
+    own = dict(height=height, height_tol=height_tol, max_steps=max_steps)
+    if grid is None and batch is None:
+        _no_batching("capacity", batching)
+        return _capacity_one(robot, act, **own, gravity=gravity, solver=solver, throw=throw)
+    return _capacity_grid(robot, act, grid, batch, own, gravity, solver, throw, batching)
+
+
+def _no_batching(what: str, batching: dict) -> None:
+    """Refuses batching options where there is no grid to batch."""
+    if batching:
+        raise TypeError(f"{what}: {sorted(batching)} apply over a grid or batch; give grid= or batch=")
+
+
+def _capacity_one(robot, act, *, height, height_tol, max_steps, gravity, solver, throw) -> Capacity:
+    """``capacity`` at one configuration."""
+    robot, act, _ = problem(Robot.paper() if robot is None else robot, act, Loads(), solver)
     max_steps = check_integer("max_steps", max_steps)
     cap = _capacity(robot, act, height, height_tol, gravity_vector(gravity), solver, max_steps)
     status.check(cap.result, throw=throw, what="the load capacity", max_steps=max_steps, unreachable=_unreachable(height))
@@ -181,28 +207,15 @@ class Optimum(NamedTuple):
         return self.result == status.SUCCESS
 
 
-def insertion_optimum(
-    robot: Robot,
-    act: Actuation,
-    load: Loads,
-    lo,
-    hi,
-    *,
-    slope_tol: float = SLOPE_TOL,
-    max_steps: int = MAX_STEPS,
-    gravity=STANDARD_GRAVITY,
-    solver: SolverOptions = DEFAULT_SOLVER,
-    throw: bool = True,
-) -> Optimum:
-    """Refines the insertion that maximises y_tip inside a bracket ``[lo, hi]`` [m] of the slope's sign change.
+def _optimum_one(robot, act, load, lo, hi, *, slope_tol, max_steps, gravity, solver, throw) -> Optimum:
+    """``optimal_insertion`` inside a bracket ``[lo, hi]`` [m] of the slope's sign change.
 
     The Illinois (modified regula falsi) method on the exact slope dy/dd from autodiff: no
     second derivatives, superlinear convergence, never leaves the bracket. With lo == hi (an
-    optimum at d = 0 or d = L) it evaluates that end. ``slope_tol`` is its own tolerance on
-    |dy/dd|, ``max_steps`` its own limit; ``solver`` and ``throw`` as for ``capacity``.
+    optimum at d = 0 or d = L) it evaluates that end.
     """
-    _first_tube(robot, "insertion_optimum")
-    gravity = gravity_vector(gravity)
+    _first_tube(robot, "optimal_insertion")
+    gravity, load = gravity_vector(gravity), Loads() if load is None else load
     act = Actuation.of(act, robot)
     insertions = jnp.asarray(act.insertions).at[..., 0].set(0.0)  # the first tube's depth is sought
     act = Actuation._rebuild(act.tensions, insertions, act.displacements, act.driven)
@@ -239,85 +252,104 @@ def insertion_optimum(
 def _capacity_point(base, point, kernel: Kernel):
     robot, act, _ = configure(base, point)
     options = dict(kernel.options, gravity=base[3], solver=base[4], throw=False)
-    return capacity(robot, act, **options)._asdict()
+    return _capacity_one(robot, act, **options)._asdict()
 
 
 def _optimum_point(base, point, kernel: Kernel):
     robot, act, load = configure(base, point)
     options = dict(kernel.options, gravity=base[3], solver=base[4], throw=False)
-    return insertion_optimum(robot, act, load, point["lo"], point["hi"], **options)._asdict()
+    return _optimum_one(robot, act, load, point["lo"], point["hi"], **options)._asdict()
 
 
-def _grid_options(f, options: dict, solver: SolverOptions) -> tuple[dict, dict, tuple]:
-    """Splits a grid entry point's keyword options into the batching options (as for
-    ``tdct.sweep``), gravity and solver (shared by every point), and f's own (static, per point)."""
-    batching = {k: options.pop(k) for k in ("chunk_size", "progress", "devices") if k in options}
-    shared = {"gravity": options.pop("gravity", inspect.signature(f).parameters["gravity"].default), "solver": solver}
-    allowed = {k for k, p in inspect.signature(f).parameters.items() if p.kind is p.KEYWORD_ONLY} - {"throw"}
-    unknown = sorted(set(options) - allowed)
+BATCHING = ("chunk_size", "progress", "devices")
+
+
+def _batching(what: str, batching: dict) -> dict:
+    """Refuses keyword arguments that are neither the entry point's own nor ``tdct.sweep``'s batching options."""
+    unknown = sorted(set(batching) - set(BATCHING))
     if unknown:
-        raise TypeError(f"{f.__name__} over a grid: unknown argument(s) {unknown}; allowed: {sorted(allowed)}")
-    options.setdefault("max_steps", MAX_STEPS)
-    check_integer("max_steps", options["max_steps"])
-    return batching, shared, tuple(sorted(options.items()))
+        raise TypeError(f"{what}: unknown argument(s) {unknown}; the batching options are {list(BATCHING)}")
+    return batching
 
 
-def load_capacity(
-    robot=None, act=None, *, grid=None, batch=None, solver: SolverOptions = DEFAULT_SOLVER, throw=True, **options
-) -> CapacityResult:
-    """``capacity`` at one configuration or over a ``grid`` / ``batch`` of inputs (see ``tdct.sweep``).
-
-    Args:
-        robot, act, grid, batch: as for ``tdct.sweep`` (the tip mass is what is sought).
-        solver: SolverOptions for every solve.
-        throw: raise ConvergenceError after the whole grid, naming the first failed or
-            unreachable point (default, as everywhere); with False they stay in ``result`` per
-            point (UNREACHABLE where the tip cannot reach the height: mass 0).
-        **options: ``capacity``'s other keyword arguments (height, height_tol, max_steps,
-            gravity) and the batching options of ``tdct.sweep`` (chunk_size, progress, devices).
-
-    Returns:
-        CapacityResult with mass [kg], reachable, iterations and result per point.
-    """
-    batching, shared, own = _grid_options(capacity, options, solver)
-    base, points, shape, axes = prepare(robot, act, None, grid, batch, **shared, single=True)
-    run = batch_options(**batching)
+def _capacity_grid(robot, act, grid, batch, own, gravity, solver, throw, batching) -> CapacityResult:
+    """``capacity`` over a grid or batch, in chunks with progress."""
+    check_integer("max_steps", own["max_steps"])
+    run = batch_options(**_batching("capacity", batching))
+    base, points, shape, axes = prepare(robot, act, None, grid, batch, gravity=gravity, solver=solver, single=True)
     start = perf_counter()
-    out = unflatten(run(Kernel(_capacity_point, own), base, points, desc="load capacity"), shape)
-    own_options = dict(own)
-    unreachable = _unreachable(own_options.get("height", 0.0))
-    status.check(
-        out["result"], throw=throw, what="the load capacity", max_steps=own_options["max_steps"], unreachable=unreachable
-    )
+    out = unflatten(run(Kernel(_capacity_point, tuple(sorted(own.items()))), base, points, desc="load capacity"), shape)
+    unreachable = _unreachable(own["height"])
+    status.check(out["result"], throw=throw, what="the load capacity", max_steps=own["max_steps"], unreachable=unreachable)
     return CapacityResult(shape=shape, axes=axes, inputs=unflatten(points, shape), seconds=perf_counter() - start, **out)
 
 
-def optimal_insertion(
-    robot=None, act=None, load=None, *, grid=None, n_curve=33, solver: SolverOptions = DEFAULT_SOLVER, throw=True, **options
-) -> OptimumResult:
-    """Insertion depth of the first tube that maximises the tip height y_tip (Fig. 13), with the
-    curve y_tip(d); any other tubes stay where ``act`` puts them.
+def load_capacity(robot=None, act=None, *, grid=None, batch=None, solver: SolverOptions = DEFAULT_SOLVER, throw=True, **options):
+    """Former name of ``capacity`` over a grid (a CapacityResult even without one)."""
+    deprecated("tdct.load_capacity", "tdct.capacity(robot, act, grid=...)")
+    own = {k: options.pop(k) for k in ("height", "height_tol", "max_steps") if k in options}
+    own = dict(dict(height=0.0, height_tol=HEIGHT_TOL, max_steps=MAX_STEPS), **own)
+    gravity = options.pop("gravity", STANDARD_GRAVITY)
+    return _capacity_grid(robot, act, grid, batch, own, gravity, solver, throw, options)
 
-    First the curve on ``n_curve`` depths from 0 to L (one sweep); its highest point brackets
-    the optimum, which ``insertion_optimum`` refines to a zero of the exact slope.
+
+def optimal_insertion(
+    robot: Robot | None = None,
+    act: Actuation | None = None,
+    load: Loads | None = None,
+    *,
+    bracket=None,
+    grid=None,
+    n_curve: int = 33,
+    slope_tol: float = SLOPE_TOL,
+    max_steps: int = MAX_STEPS,
+    gravity=STANDARD_GRAVITY,
+    solver: SolverOptions = DEFAULT_SOLVER,
+    throw: bool = True,
+    **batching,
+):
+    """Insertion depth of the first tube that maximises the tip height y_tip (Fig. 13); any other
+    tubes stay where ``act`` puts them.
+
+    Without a ``bracket``: first the curve y_tip(d) on ``n_curve`` depths from 0 to L (one
+    sweep); its highest point brackets the optimum, which is then refined as below, at one
+    configuration or at every point of a ``grid``. With ``bracket=(lo, hi)`` [m] of the slope's
+    sign change: the refinement alone, pure JAX (jit, vmap), by the Illinois (modified regula
+    falsi) method on the exact slope dy/dd from autodiff: no second derivatives, superlinear
+    convergence, never leaves the bracket (lo == hi evaluates that end, an optimum at 0 or L).
 
     Args:
         robot, act, load: as for ``tdct.sweep``.
+        bracket: (optional) (lo, hi) [m]: refine inside it only.
         grid: (optional) varies the other inputs, e.g. {"tip_mass": ..., "tensions": ...}.
         n_curve: depths on the curve, >= 3.
+        slope_tol: tolerance on |dy/dd| (dimensionless), the refinement's own.
+        max_steps: most Illinois steps.
+        gravity: world gravity [m/s^2].
         solver: SolverOptions for every solve.
-        throw: as for ``load_capacity``.
-        **options: ``insertion_optimum``'s other keyword arguments (slope_tol, max_steps,
-            gravity) and the batching options of ``tdct.sweep`` (chunk_size, progress, devices).
+        throw: raise ConvergenceError unless the result is SUCCESS (default, as everywhere); over
+            a grid, after the whole grid, naming the first failed point.
+        **batching: without a bracket, ``tdct.sweep``'s chunk_size, progress and devices.
 
     Returns:
-        OptimumResult with insertion [m], height [m], slope, iterations, result, interior,
-        curve_insertion (n_curve,) [m] and curve_height (shape + (n_curve,)) [m].
+        With a bracket: Optimum (insertion [m], height [m], slope, iterations, result).
+        Otherwise: OptimumResult with those per point, and interior, curve_insertion (n_curve,)
+        [m] and curve_height (shape + (n_curve,)) [m].
     """
+    own = dict(slope_tol=slope_tol, max_steps=max_steps)
+    if bracket is not None:
+        _no_batching("optimal_insertion with a bracket", batching)
+        if grid is not None:
+            raise TypeError("optimal_insertion: give either bracket= (one configuration) or grid=, not both")
+        lo, hi = bracket
+        robot = Robot.paper() if robot is None else robot
+        return _optimum_one(robot, act, load, lo, hi, **own, gravity=gravity, solver=solver, throw=throw)
     if grid is not None and ("insertion" in grid or "insertions" in grid):
         raise ValueError("optimal_insertion: the insertion is what is optimised; do not put it in grid")
     check_integer("n_curve", n_curve, 3)
-    batching, shared, own = _grid_options(insertion_optimum, options, solver)
+    check_integer("max_steps", max_steps)
+    shared = dict(gravity=gravity, solver=solver)
+    batching = _batching("optimal_insertion", batching)
     base, points, shape, axes = prepare(robot, act, load, grid, None, **shared, single=True)
     robot, act, load = base[:3]
     _first_tube(robot, "optimal_insertion")
@@ -336,12 +368,12 @@ def optimal_insertion(
     interior = (k > 0) & (k < n_curve - 1)
     points["lo"] = np.where(interior, depths[np.maximum(k - 1, 0)], depths[k])
     points["hi"] = np.where(interior, depths[np.minimum(k + 1, n_curve - 1)], depths[k])
-    kernel = Kernel(_optimum_point, own)
+    kernel = Kernel(_optimum_point, tuple(sorted(own.items())))
     out = unflatten(run(kernel, base, points, desc="optimal insertion"), shape)
     curve_result = curve.result.reshape(*shape, n_curve)
     failed_curve = np.where(curve_result != status.SUCCESS, curve_result, 0).max(axis=-1)
     out["result"] = np.where(out["result"] == status.SUCCESS, failed_curve, out["result"]).astype(np.int32)
-    status.check(out["result"], throw=throw, what="the optimal insertion", max_steps=dict(own)["max_steps"])
+    status.check(out["result"], throw=throw, what="the optimal insertion", max_steps=max_steps)
     inputs = unflatten({k: v for k, v in points.items() if k not in ("lo", "hi")}, shape)
     return OptimumResult(
         shape=shape,
@@ -353,3 +385,9 @@ def optimal_insertion(
         interior=interior.reshape(shape),
         **out,
     )
+
+
+def insertion_optimum(robot, act, load, lo, hi, **options) -> Optimum:
+    """Former name of ``optimal_insertion(robot, act, load, bracket=(lo, hi))``."""
+    deprecated("tdct.insertion_optimum", "tdct.optimal_insertion(robot, act, load, bracket=(lo, hi))")
+    return optimal_insertion(robot, act, load, bracket=(lo, hi), **options)

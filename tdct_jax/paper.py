@@ -18,7 +18,7 @@ from .description import Robot
 from .ik import Bounds, LeastTension, Stiffness, Target, inverse_kinematics
 from .inputs import Actuation, Loads
 from .lm import levenberg_marquardt
-from .manipulation import capacity, insertion_optimum, load_capacity, optimal_insertion
+from .manipulation import capacity, optimal_insertion
 from .mechanics import compliance, compliance_ellipsoid
 from .options import DEFAULT_SOLVER
 from .scene import Capsule, Plane, Scene
@@ -132,13 +132,13 @@ def fig13_optima(robot: Robot, tension: float, masses=FIG13_MASSES, n_curve: int
 
 def fig14_capacities(robot: Robot, tensions=CAPACITY_TENSIONS, insertions=FIG9_INSERTIONS, **options):
     """Fig. 14: load capacity [kg] (tip brought to y = 0) on a tendon-1 tension x insertion grid."""
-    return load_capacity(robot, grid={"tensions": tendon1(robot, tensions), "insertion": np.asarray(insertions)}, **options)
+    return capacity(robot, grid={"tensions": tendon1(robot, tensions), "insertion": np.asarray(insertions)}, **options)
 
 
 def ten_capacities(robot: Robot, **options):
     """The ten load capacities the paper reports (Sec. V.A): insertion (0, 70 mm) x tendon 1 at 6..10 N."""
     grid = {"insertion": np.asarray(CAPACITY_INSERTIONS), "tensions": tendon1(robot, CAPACITY_TENSIONS)}
-    return load_capacity(robot, grid=grid, **options)
+    return capacity(robot, grid=grid, **options)
 
 
 def bending_range(robot: Robot, tensions=TABLE3_TENSIONS, insertions=TABLE3_INSERTIONS, masses=TABLE3_MASSES, **options):
@@ -325,10 +325,10 @@ class HighestReach(NamedTuple):
 @jax.jit
 def _refine(robot: Robot, load: Loads, tension, lo, hi, solver):
     """The insertion in [lo, hi] [m] that maximises y_tip with ``tension`` [N] on tendon 1
-    (``insertion_optimum``), and there: y_tip [m], its exact gradient (d/dtau [m/N], d/dd), the
+    (``optimal_insertion`` in a bracket), and there: y_tip [m], its exact gradient (d/dtau [m/N], d/dd), the
     compliance along -y [m/N], and whether every step converged. One compiled program."""
     tau = jnp.zeros(robot.n_tendons).at[0].set(tension)
-    opt = insertion_optimum(robot, Actuation(tau), load, lo, hi, solver=solver, throw=False)
+    opt = optimal_insertion(robot, Actuation(tau), load, bracket=(lo, hi), solver=solver, throw=False)
 
     def height(x):
         act = Actuation(jnp.zeros(robot.n_tendons).at[0].set(x[0]), x[1])
@@ -356,7 +356,7 @@ def highest_reach(
 
     A grid of n_tensions x n_insertions forward solves locates the maximum. Where it lies on the
     tension bound (it does for the paper's 50 g at 10 N: pulling harder lifts higher), the problem
-    is one-dimensional in the insertion: ``insertion_optimum`` refines it, between the grid's
+    is one-dimensional in the insertion: ``optimal_insertion`` refines it, between the grid's
     neighbours of the highest point, to a zero of the exact slope dy/dd (as ``optimal_insertion``
     does for Fig. 13). The exact gradient there (``jax.jacfwd`` through the implicitly
     differentiated solve) checks the first-order conditions: dy/dd = 0, dy/dtau > 0. No offset or

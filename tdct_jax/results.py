@@ -150,7 +150,7 @@ class SweepResult(GridResult):
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class CapacityResult(GridResult):
-    """Outputs of ``tdct.load_capacity``: mass [kg] (0 where unreachable, with result
+    """Outputs of ``tdct.capacity`` over a grid: mass [kg] (0 where unreachable, with result
     UNREACHABLE), reachable, iterations (safeguarded Newton steps on the mass), per point."""
 
     mass: np.ndarray
@@ -162,7 +162,7 @@ class CapacityResult(GridResult):
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class OptimumResult(GridResult):
-    """Outputs of ``tdct.optimal_insertion``: insertion [m] that maximises the tip height, the
+    """Outputs of ``tdct.optimal_insertion`` without a bracket: insertion [m] that maximises the tip height, the
     height [m] and its slope dy/dd there, iterations, whether the optimum is interior, and the
     curve it was bracketed on: curve_insertion (n_curve,) [m], curve_height (shape + (n_curve,)) [m]."""
 

@@ -90,6 +90,12 @@ def test_former_names_still_work_and_say_what_to_write(monkeypatch):
     np.testing.assert_array_equal(act.insertions, [0.05])
     with pytest.warns(FutureWarning, match=r"'sections\[\*\]\.E'"):
         assert robot.E_silicone == 1e6
+    with pytest.warns(FutureWarning, match=r"write tdct.capacity\(robot, act, grid=...\)"):
+        with pytest.raises(ValueError, match="max_steps"):  # refused after the warning, before any solve
+            tdct.load_capacity(robot, max_steps=0)
+    with pytest.warns(FutureWarning, match=r"bracket=\(lo, hi\)"):
+        with pytest.raises(ValueError, match="no tube"):
+            tdct.insertion_optimum(tdct.Robot(length=robot.length, sections=robot.sections), None, None, 0.0, 0.1)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # once each: the second use is silent
         tdct.Robot()

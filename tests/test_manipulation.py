@@ -16,7 +16,7 @@ def tip_y(robot, act, mass):
 @pytest.fixture(scope="module")
 def capacities(robot):
     grid = {"insertion": np.array([0.0, 0.07]), "tensions": np.array([[6.0, 0, 0, 0], [10.0, 0, 0, 0]])}
-    return tdct.load_capacity(robot, grid=grid, progress=False)
+    return tdct.capacity(robot, grid=grid, progress=False)
 
 
 def test_capacity_lifts_the_tip_exactly_to_the_base_height(robot, capacities):
@@ -49,14 +49,14 @@ def test_a_tip_that_cannot_reach_the_height_is_unreachable(robot, capacities):
     """3 N on tendon 1 cannot lift even the unloaded tip to y = 0 (the fixture's points beside it:
     four points with the fixture's inputs, so its compiled program serves)."""
     batch = {"insertion": [0.0, 0.0, 0.0, 0.07], "tensions": np.outer([3.0, 6.0, 10.0, 10.0], [1.0, 0, 0, 0])}
-    res = tdct.load_capacity(robot, batch=batch, progress=False, throw=False)
+    res = tdct.capacity(robot, batch=batch, progress=False, throw=False)
     assert res.result.tolist() == [tdct.status.UNREACHABLE] + [tdct.status.SUCCESS] * 3
     assert res.reachable.tolist() == [False, True, True, True] and res.mass[0] == 0.0 and not res.converged[0]
     np.testing.assert_allclose(res.mass[1:], capacities.mass[[0, 0, 1], [0, 1, 1]], rtol=1e-12)
     with pytest.raises(
         tdct.ConvergenceError, match=r"target unreachable: even with no tip mass the tip stays below the height y = 0 m"
     ):
-        tdct.load_capacity(robot, batch=batch, progress=False)
+        tdct.capacity(robot, batch=batch, progress=False)
 
 
 @pytest.mark.slow
@@ -83,10 +83,16 @@ def test_capacity_grid_saves_to_csv_and_npz(capacities, tmp_path):
     np.testing.assert_array_equal(data["axis_insertion"], [0.0, 0.07])
 
 
-def test_the_grid_entry_points_take_the_solver_by_name():
-    for f in (tdct.load_capacity, tdct.optimal_insertion, tdct.capacity, tdct.insertion_optimum):
+def test_the_entry_points_take_the_solver_by_name_and_refuse_batching_without_a_grid(robot):
+    for f in (tdct.optimal_insertion, tdct.capacity):
         p = inspect.signature(f).parameters["solver"]
         assert p.kind is p.KEYWORD_ONLY and p.default is tdct.options.DEFAULT_SOLVER
+    with pytest.raises(TypeError, match=r"\['chunk_size'\] apply over a grid or batch"):
+        tdct.capacity(robot, tdct.Actuation((8.0, 0, 0, 0)), chunk_size=4)
+    with pytest.raises(TypeError, match=r"unknown argument\(s\) \['hieght'\]"):
+        tdct.capacity(robot, grid={"insertion": [0.0]}, hieght=0.01)
+    with pytest.raises(TypeError, match="bracket= .* or grid=, not both"):
+        tdct.optimal_insertion(robot, bracket=(0.0, 0.1), grid={"tip_mass": [0.01]})
 
 
 def test_the_insertion_optimum_needs_a_tube(robot):
