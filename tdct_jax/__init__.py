@@ -8,7 +8,7 @@ from .version import __version__ as __version__
 use_fast_compile_flags()
 jax.config.update("jax_enable_x64", True)
 
-from . import checks, inputs  # noqa: E402
+from . import checks, inputs, manipulation  # noqa: E402
 from . import fields as fields  # noqa: E402
 from . import status as status  # noqa: E402
 from .calibrate import Calibration as Calibration  # noqa: E402
@@ -90,14 +90,14 @@ _RENAMED = {
 }
 
 
-_WARN_WHEN_CALLED = {"TipLoad": "inputs", "load_capacity": "manipulation", "insertion_optimum": "manipulation"}
+_WARN_WHEN_CALLED = {"TipLoad": inputs, "load_capacity": manipulation, "insertion_optimum": manipulation}
 
 
 def __getattr__(name):
     """The former names of merged types (``tdct.GeneralRobot``): the merged type, warning once;
     ``tdct.TipLoad``, ``tdct.load_capacity`` and ``tdct.insertion_optimum``, which warn when called."""
     if name in _WARN_WHEN_CALLED:
-        return getattr(globals()[_WARN_WHEN_CALLED[name]], name)
+        return getattr(_WARN_WHEN_CALLED[name], name)
     if name in _RENAMED:
         new, obj = _RENAMED[name]
         checks.deprecated(f"tdct.{name}", f"tdct.{new}")
