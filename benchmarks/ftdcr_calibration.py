@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 from _common import write_result
 
-from tdct_jax.calibrate_rig import calibrate_rig, predict
+import tdct_jax as tdct
+from tdct_jax.calibrate_rig import predict
 from tdct_jax.plotting import plot_prediction
 from tdct_jax.recording import read_dataset
 from tdct_jax.rig import Rig
@@ -69,7 +70,7 @@ def main() -> None:
     print(f"  RMSE {1e3 * before.errors['rmse']:.2f} mm")
     train = data.train.subset(slice(None, None, args.every))
     t = time.perf_counter()
-    fit = calibrate_rig(lab, train, PARAMS, max_steps=args.max_steps, throw=False)
+    fit = tdct.calibrate(lab, train, PARAMS, max_steps=args.max_steps, throw=False)
     fit_seconds = time.perf_counter() - t
     print(fit.summary())
     after = predict(fit.rig, data.validation)

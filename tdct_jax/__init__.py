@@ -16,7 +16,7 @@ from .calibrate import calibrate as calibrate  # noqa: E402
 from .calibrate import synthesize as synthesize  # noqa: E402
 from .calibrate_rig import Prediction as Prediction  # noqa: E402
 from .calibrate_rig import RigCalibration as RigCalibration  # noqa: E402
-from .calibrate_rig import calibrate_rig as calibrate_rig  # noqa: E402
+from .calibrate_rig import calibrate_rig as calibrate_rig  # noqa: E402  (former name; warns when called)
 from .calibrate_rig import predict as predict  # noqa: E402
 from .calibrate_rig import synthesize_recording as synthesize_recording  # noqa: E402
 from .checks import UnitWarning as UnitWarning  # noqa: E402
@@ -90,12 +90,17 @@ _RENAMED = {
 }
 
 
-_WARN_WHEN_CALLED = {"TipLoad": inputs, "load_capacity": manipulation, "insertion_optimum": manipulation}
+_WARN_WHEN_CALLED = {
+    "TipLoad": inputs,
+    "load_capacity": manipulation,
+    "insertion_optimum": manipulation,
+}
 
 
 def __getattr__(name):
     """The former names of merged types (``tdct.GeneralRobot``): the merged type, warning once;
-    ``tdct.TipLoad``, ``tdct.load_capacity`` and ``tdct.insertion_optimum``, which warn when called."""
+    ``tdct.TipLoad``, ``tdct.load_capacity`` and ``tdct.insertion_optimum``, which warn when called
+    (``tdct.calibrate_rig`` too, imported by name: its module shares the name)."""
     if name in _WARN_WHEN_CALLED:
         return getattr(_WARN_WHEN_CALLED[name], name)
     if name in _RENAMED:

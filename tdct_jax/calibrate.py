@@ -1,4 +1,6 @@
-"""Calibration of robot fields from measured shapes (paper Sec. III.B), and synthetic shape data.
+"""Calibration: ``calibrate`` fits a model to measurements, shapes or a rig recording; the fit to
+measured shapes (paper Sec. III.B) and synthetic shape data live here, the fit to a recording in
+``calibrate_rig.py``.
 
 The paper fits the silicone's Young's modulus by minimising the error between five measured shapes
 and the model. Here any subset of any robot's scalar fields (``fields.py``: "sections[*].E",
@@ -11,7 +13,7 @@ experiments).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from functools import partial
 from time import perf_counter
 
@@ -21,6 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from . import fields, status
+from .calibrate_rig import RIG_PARAMS, RigCalibration, fit_recording
 from .checks import check_integer
 from .data import Experiment, stack
 from .description import Robot
@@ -28,6 +31,8 @@ from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
 from .lm import covariance, levenberg_marquardt
 from .mechanics import check_params, shape_errors
 from .options import DEFAULT_SOLVER, SolverOptions
+from .recording import Recording
+from .rig import Rig
 from .solve import Solution, check_solution, problem, solve
 
 FBG_POINTS = 33
@@ -165,6 +170,53 @@ class Calibration:
 
 
 def calibrate(
+    model: Robot | Rig,
+    data: Sequence[Experiment] | Recording,
+    params: Sequence[str] | None = None,
+    *,
+    bounds: Mapping[str, tuple] | None = None,
+    max_steps: int | None = None,
+    xtol: float | None = None,
+    ftol: float | None = None,
+    gravity=STANDARD_GRAVITY,
+    solver: SolverOptions | None = None,
+    progress: bool = True,
+    throw: bool = True,
+) -> Calibration | RigCalibration:
+    """Fits a model's values to measurements by Levenberg-Marquardt with exact Jacobians.
+
+    One verb for the two kinds of measurement:
+
+    - **shapes**: ``model`` a Robot, ``data`` a sequence of Experiment (points along the body
+      under known actuation and loads, paper Sec. III.B; ``data.read_experiments``). Fits robot
+      fields (default ``("sections[*].E",)``); see ``fit_shapes``. Returns a Calibration.
+    - **a rig recording**: ``model`` a Rig, ``data`` a Recording (servo readings in, measured
+      tips out; ``read_recording``, ``read_dataset``). Fits robot fields and rig values (default
+      ``calibrate_rig.RIG_PARAMS``), with ``bounds``; see ``calibrate_rig.fit_recording``.
+      Returns a RigCalibration. Gravity is the rig's own value.
+
+    ``max_steps``, ``xtol``, ``ftol`` (the fit's own limit and tolerances) and ``solver`` default
+    to each kind's own (None); ``progress`` shows a bar; ``throw`` raises ConvergenceError when
+    the fit does not converge (default, as everywhere).
+    """
+    given = {k: v for k, v in dict(max_steps=max_steps, xtol=xtol, solver=solver).items() if v is not None}
+    if isinstance(data, Recording):
+        if not isinstance(model, Rig):
+            raise TypeError(f"a recording is fitted on its rig: model must be a tdct.Rig, got {type(model).__name__}")
+        if gravity is not STANDARD_GRAVITY:
+            raise TypeError("gravity: a recording's gravity is its rig's own (Rig.g, gravity_azimuth, gravity_elevation)")
+        rig_options = dict(given, **({} if ftol is None else {"ftol": ftol}))
+        params = RIG_PARAMS if params is None else params
+        return fit_recording(model, data, params, bounds=bounds, progress=progress, throw=throw, **rig_options)
+    if bounds is not None or ftol is not None:
+        raise TypeError("bounds and ftol apply to a rig recording's fit (data a tdct.Recording)")
+    if not isinstance(model, Robot):
+        raise TypeError(f"shapes are fitted on a robot: model must be a tdct.Robot, got {type(model).__name__}")
+    params = ("sections[*].E",) if params is None else params
+    return fit_shapes(model, data, params, gravity=gravity, progress=progress, throw=throw, **given)
+
+
+def fit_shapes(
     robot: Robot,
     experiments: Sequence[Experiment],
     params: Sequence[str] = ("sections[*].E",),
@@ -176,7 +228,8 @@ def calibrate(
     progress: bool = True,
     throw: bool = True,
 ) -> Calibration:
-    """Fits robot fields to measured shapes by Levenberg-Marquardt with exact Jacobians (Sec. III.B).
+    """Fits robot fields to measured shapes by Levenberg-Marquardt with exact Jacobians (Sec. III.B;
+    ``tdct.calibrate(robot, experiments)``).
 
     The residuals are model minus measured positions at every measured point of every experiment
     (weighted by ``Experiment.weight``), so the cost is the sum of the experiments' squared RMSEs

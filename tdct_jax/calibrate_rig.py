@@ -25,7 +25,7 @@ from tqdm import tqdm
 
 from . import rig as rigs
 from . import status
-from .checks import check_integer
+from .checks import check_integer, deprecated
 from .lm import covariance, levenberg_marquardt
 from .options import SolverOptions
 from .recording import Recording, check_tendons
@@ -65,7 +65,7 @@ def _fit_step(x, rig, servos, guesses, measured, params, solver):
 
 @dataclasses.dataclass(frozen=True)
 class RigCalibration:
-    """Result of ``calibrate_rig``; SI units (m, N, Pa, rad).
+    """Result of ``tdct.calibrate`` on a rig recording; SI units (m, N, Pa, rad).
 
     Attributes:
         params: the fitted names (``rig.py``). initial, values: their start and fitted values.
@@ -153,7 +153,7 @@ def _servos(rig: rigs.Rig, rec: Recording) -> np.ndarray:
     return rec.displacements
 
 
-def calibrate_rig(
+def fit_recording(
     rig: rigs.Rig,
     recording: Recording,
     params: Sequence[str] = RIG_PARAMS,
@@ -166,7 +166,8 @@ def calibrate_rig(
     progress: bool = True,
     throw: bool = True,
 ) -> RigCalibration:
-    """Fits rig and robot values to a recording by bounded Levenberg-Marquardt with exact Jacobians.
+    """Fits rig and robot values to a recording by bounded Levenberg-Marquardt with exact Jacobians
+    (``tdct.calibrate(rig, recording)``).
 
     Args:
         rig: the robot on its rig with the starting values and every value not fitted.
@@ -247,6 +248,12 @@ def calibrate_rig(
     )
     status.check(fit.result, throw=throw, what=f"the rig calibration of {', '.join(params)}", max_steps=max_steps)
     return result
+
+
+def calibrate_rig(rig: rigs.Rig, recording: Recording, params: Sequence[str] = RIG_PARAMS, **options) -> RigCalibration:
+    """Former name of ``tdct.calibrate(rig, recording, params)``."""
+    deprecated("tdct.calibrate_rig", "tdct.calibrate(rig, recording, params)")
+    return fit_recording(rig, recording, params, **options)
 
 
 def _bounds(params, initial, bounds):

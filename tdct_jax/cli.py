@@ -704,7 +704,7 @@ def _names(text: str) -> tuple:
 
 def _calibrate_rig_command(args) -> int:
     """``tdct calibrate --dataset``: the rig fitted to the train file, the validation file predicted."""
-    from .calibrate_rig import RIG_PARAMS, RIG_SOLVER, calibrate_rig, predict
+    from .calibrate_rig import RIG_PARAMS, RIG_SOLVER, fit_recording, predict
     from .plotting import plot_prediction
     from .recording import read_dataset
     from .rig import Rig
@@ -723,7 +723,7 @@ def _calibrate_rig_command(args) -> int:
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
     train = data.train.subset(slice(None, None, args.every))
-    fit = calibrate_rig(rig, train, params, max_steps=args.max_steps, solver=solver, progress=not args.quiet, throw=False)
+    fit = fit_recording(rig, train, params, max_steps=args.max_steps, solver=solver, progress=not args.quiet, throw=False)
     report = {"dataset": str(data.description), "robot": str(robot_file), "train_samples": len(train), "fit": fit.to_dict()}
     prediction = None
     if data.validation is not None:

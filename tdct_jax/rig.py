@@ -42,6 +42,8 @@ from .options import DEFAULT_SOLVER, SolverOptions
 from .shooting import force_scale, shoot, unscaled
 from .tree import pytree, set_fields
 
+STANDARD_G = float(np.linalg.norm(STANDARD_GRAVITY))
+"""Standard gravity's magnitude [m/s^2], the default ``Rig.g``."""
 RAMP = 8
 """Sub-steps of the actuation ramp from the last converged sample when a warm start fails."""
 _VECTORS = {"pretension": None, "rotation": 3, "translation": 3}
@@ -71,7 +73,7 @@ class Rig:
     translation: object = (0.0, 0.0, 0.0)
     gravity_azimuth: float = 0.0
     gravity_elevation: float = -np.pi / 2
-    g: float = STANDARD_GRAVITY
+    g: float = STANDARD_G
 
     def __post_init__(self):
         if not isinstance(self.robot, Robot):
@@ -109,7 +111,7 @@ class Rig:
         robot = Robot.from_table(data, path)
         table = data.get("rig", {})
         keys = {"scale": 1.0, "pretension": None, "rotation_deg": (0.0, 0.0, 0.0), "translation": (0.0, 0.0, 0.0)}
-        keys |= {"gravity_azimuth_deg": 0.0, "gravity_elevation_deg": -90.0, "g": STANDARD_GRAVITY}
+        keys |= {"gravity_azimuth_deg": 0.0, "gravity_elevation_deg": -90.0, "g": STANDARD_G}
         unknown = sorted(set(table) - set(keys)) if isinstance(table, dict) else ["(not a table)"]
         if unknown:
             raise ValueError(f"robot file {path}: [rig] has unknown key(s) {unknown}; allowed: {list(keys)}")

@@ -93,6 +93,9 @@ def test_former_names_still_work_and_say_what_to_write(monkeypatch):
     with pytest.warns(FutureWarning, match=r"write tdct.capacity\(robot, act, grid=...\)"):
         with pytest.raises(ValueError, match="max_steps"):  # refused after the warning, before any solve
             tdct.load_capacity(robot, max_steps=0)
+    with pytest.warns(FutureWarning, match=r"write tdct.calibrate\(rig, recording, params\)"):
+        with pytest.raises(ValueError, match="at least one"):
+            tdct.calibrate_rig(None, None, ())
     with pytest.warns(FutureWarning, match=r"bracket=\(lo, hi\)"):
         with pytest.raises(ValueError, match="no tube"):
             tdct.insertion_optimum(tdct.Robot(length=robot.length, sections=robot.sections), None, None, 0.0, 0.1)

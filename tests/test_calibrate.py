@@ -3,6 +3,7 @@ the parameters that generated synthetic FBG-like data (Sec. III.B's protocol).""
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -91,6 +92,20 @@ def test_calibration_that_runs_out_of_steps_says_so(start, measured):
 def test_bad_parameter_names_are_refused(robot, measured, params, match):
     with pytest.raises(ValueError, match=match):
         tdct.calibrate(robot, measured, params, progress=False)
+
+
+def test_calibrate_takes_shapes_on_a_robot_and_a_recording_on_its_rig(robot, measured):
+    """One verb, two kinds of data: each refused with the other's model or options, before any solve."""
+    recording = tdct.Recording(
+        "r", Path("r.csv"), np.array(["", ""]), None, np.zeros((2, 4)), None, None, np.zeros((2, 3)), (), np.arange(2)
+    )
+    rig = tdct.Rig(robot.replace(tendons=tuple(dataclasses.replace(t, stiffness=1e3) for t in robot.tendons)))
+    with pytest.raises(TypeError, match="a recording is fitted on its rig: model must be a tdct.Rig, got Robot"):
+        tdct.calibrate(robot, recording)
+    with pytest.raises(TypeError, match="shapes are fitted on a robot: model must be a tdct.Robot, got Rig"):
+        tdct.calibrate(rig, measured)
+    with pytest.raises(TypeError, match="bounds and ftol apply to a rig recording's fit"):
+        tdct.calibrate(robot, measured, bounds={"sections[*].E": (1e5, 1e7)})
 
 
 @pytest.fixture(scope="session")

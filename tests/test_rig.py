@@ -15,9 +15,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import tdct_jax as tdct
 from tdct_jax import cli
 from tdct_jax import rig as rigs
-from tdct_jax.calibrate_rig import RIG_SOLVER, calibrate_rig, predict, synthesize_recording
+from tdct_jax.calibrate_rig import RIG_SOLVER, predict, synthesize_recording
 from tdct_jax.recording import read_dataset
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "ftdcr-v4"
@@ -167,7 +168,7 @@ def test_calibration_recovers_known_values(lab, truth, servos):
     and the registration, which may be zero, within 1e-4 rad and 0.01 mm). With 1 mm noise the
     truth lies within 3 standard errors of every estimate."""
     exact = synthesize_recording(truth, servos)
-    fit = calibrate_rig(lab, exact, PARAMS, progress=False)
+    fit = tdct.calibrate(lab, exact, PARAMS, progress=False)
     for p in PARAMS:
         if p.startswith(("tendons[0].angle", "tendons[4]", "tendons[8]", "rotation")):
             assert abs(fit.values[p] - TRUTH[p]) < 1e-4, p
@@ -178,7 +179,7 @@ def test_calibration_recovers_known_values(lab, truth, servos):
     assert fit.after["rmse"] < 1e-6 < fit.before["rmse"]
 
     noisy = synthesize_recording(truth, servos, noise=1e-3, seed=3)
-    fit = calibrate_rig(lab, noisy, PARAMS, progress=False)
+    fit = tdct.calibrate(lab, noisy, PARAMS, progress=False)
     assert fit.noise == pytest.approx(1e-3, rel=0.35)
     for p in PARAMS:
         assert abs(fit.values[p] - TRUTH[p]) < 3 * fit.std_errors[p], (p, fit.values[p], fit.std_errors[p])
