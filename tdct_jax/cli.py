@@ -182,8 +182,9 @@ def _parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="FIELD=VALUE",
-        help="override one robot field by its name, SI units (sections[*].E=1.1e6, tendons[0].offset=0.012, "
-        "tubes[0].E=60e9, length=0.2); repeatable, applied after --robot",
+        help="override one robot field by its name, SI units but angles in degrees as in robot files "
+        "(sections[*].E=1.1e6, tendons[0].offset=0.012, tendons[0].angle_deg=90, tubes[0].E=60e9, length=0.2; "
+        "items count from 0: tendons[0] is tendon 1); repeatable, applied after --robot",
     )
     described.add_argument("--steps", type=int, default=STEPS, help=f"RK4 steps per segment (default {STEPS})")
     described.add_argument(
@@ -399,7 +400,7 @@ def _robot(args) -> Robot:
     replaced (fields.py names)."""
     robot = Robot.from_toml(args.robot) if args.robot else Robot.paper()
     try:
-        return fields.replace(robot, dict(getattr(args, "set", [])))
+        return fields.replace(robot, dict(fields.typed(*a) for a in getattr(args, "set", [])))
     except ValueError as e:
         raise ValueError(f"--set: {e}") from None
 

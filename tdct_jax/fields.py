@@ -6,8 +6,9 @@ kind with one shared value (``sections[*].E``: one modulus for the whole body,
 ``tendons[*].stiffness``: one EA for every tendon), ``[a-b]`` for items a to b
 (``tendons[0-2].stiffness``: one EA for a segment's three tendons). Items count from 0 here, as
 in Python; tendons are numbered from 1 only where a person reads or types a tendon number (the
-CLI's ``--tendons``, sweep specs' column names). SI units: tendon angles and twists in rad (the
-robot file and ``tdct --set`` take degrees: ``angle_deg``, ``twist_deg_per_m``).
+CLI's ``--tendons``, sweep specs' column names). SI units: tendon angles and twists in rad; where
+a person types them (robot files, ``tdct --set``: ``typed``) in degrees, under the robot file's
+key names ``angle_deg`` and ``twist_deg_per_m``.
 
 The paper's robot formerly had names of its own (``E_silicone``, ``tendon_offset``, ...): they
 still resolve, to the names in ``PAPER_NAMES``, with a FutureWarning once each.
@@ -16,6 +17,7 @@ still resolve, to the names in ``PAPER_NAMES``, with a FutureWarning once each.
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 from collections.abc import Mapping
 
@@ -38,6 +40,8 @@ PAPER_NAMES = {
 """The paper robot's former field names and the names they stand for now."""
 LINEAR = ("nu", "angle", "twist")
 """Field names whose values may be zero or negative; every other field is positive."""
+DEGREES = {"angle": "angle_deg", "twist": "twist_deg_per_m"}
+"""Fields in rad (rad/m) and the names under which a person types them in degrees (per m)."""
 _NAME = re.compile(r"^(\w+)\[(\d+|\*|\d+-\d+)\]\.(\w+)$")
 
 
@@ -73,6 +77,20 @@ def _parse(robot, name: str) -> tuple[str, tuple[int, ...], str] | None:
         raise ValueError(f"{name!r}: the robot has {n} {m[1]} (indices 0 to {n - 1}, or a range a-b with a <= b)")
     kinds = (f"{k}[i, * or a-b].{{{', '.join(f.name for f in dataclasses.fields(c))}}}" for k, c in items.items())
     raise ValueError(f"{name!r} is not a scalar robot field; allowed: {', '.join(['length', *kinds])}")
+
+
+def typed(name: str, value: float) -> tuple[str, float]:
+    """A field as a person types it (``tdct --set``), as (name, SI value): angles in degrees under
+    the robot file's names (``tendons[0].angle_deg=90``, ``tendons[*].twist_deg_per_m=360``);
+    the radian names are refused there, so 90 never passes as 90 rad."""
+    head, _, field = name.rpartition(".")
+    for si, deg in DEGREES.items():
+        if field == deg:
+            return f"{head}.{si}", math.radians(value)
+        if field == si:
+            unit = "degrees per metre" if si == "twist" else "degrees"
+            raise ValueError(f"{name} = {value:g}: angles are typed in {unit} here; write {head}.{deg}={value:g}")
+    return name, value
 
 
 def check(robot, name: str) -> None:

@@ -40,9 +40,11 @@ def test_tensions_of_any_length_give_the_api_tip(capsys, two_segment):
 
 
 def test_set_changes_a_general_field(capsys, two_segment):
-    assert main([*SOLVE, "--set", "sections[*].E=60e9", "--set", "tendons[0].offset=0.012"]) == 0
+    """Angles typed in degrees, under the robot file's key name."""
+    argv = [*SOLVE, "--set", "sections[*].E=60e9", "--set", "tendons[0].offset=0.012", "--set", "tendons[2].angle_deg=200"]
+    assert main(argv) == 0
     text = capsys.readouterr().out
-    robot = fields.replace(two_segment, {"sections[*].E": 60e9, "tendons[0].offset": 0.012})
+    robot = fields.replace(two_segment, {"sections[*].E": 60e9, "tendons[0].offset": 0.012, "tendons[2].angle": np.pi * 10 / 9})
     tip = 1e3 * np.asarray(tdct.solve(robot, tdct.Actuation(TENSIONS)).tip_position)
     assert f"tip position [mm]: x = {tip[0]:.3f}, y = {tip[1]:.3f}, z = {tip[2]:.3f}" in text
     assert "tensions [N]:      1.5000, 0.0000, 0.4000" in text and "slack tendons:     none" in text
@@ -100,6 +102,10 @@ def test_plot_robot_draws_sections_tendons_masses_and_loads(two_segment):
         (
             [*SOLVE, "--set", "tendons[6].offset=0.01"],
             "--set: 'tendons[6].offset': the robot has 6 tendons (indices 0 to 5, or a range a-b with a <= b)",
+        ),
+        (
+            [*SOLVE, "--set", "tendons[0].angle=90"],
+            "--set: tendons[0].angle = 90: angles are typed in degrees here; write tendons[0].angle_deg=90",
         ),
         ([*SOLVE, "--displacements-mm", "1:200"], "tendon 1's 200 mm is outside the allowed range (-inf, 200) mm"),
         ([*SOLVE, "--displacements-mm", "7:1"], "--displacements-mm 7:1: tendon numbers, each once, 1 to 6"),
