@@ -81,7 +81,8 @@ class Rig:
         n = self.robot.n_tendons
         missing = [i for i, t in enumerate(self.robot.tendons) if t.stiffness is None]
         if missing:
-            raise ValueError(f"tendons {missing} have no stiffness: a displacement-driven rig needs each tendon's EA [N]")
+            which = ", ".join(f"{i + 1} (tendons[{i}])" for i in missing)
+            raise ValueError(f"tendon(s) {which} have no stiffness: a displacement-driven rig needs each tendon's EA [N]")
         pretension = np.zeros(n) if self.pretension is None else self.pretension
         set_fields(
             self,

@@ -153,7 +153,7 @@ def test_rig_file_round_trip_and_errors(lab, tmp_path):
     with pytest.raises(ValueError, match=r"bad.toml: \[rig\]: Rig.scale = -1"):
         rigs.Rig.from_toml(tmp_path / "bad.toml")
     (tmp_path / "bad.toml").write_text(text.replace("stiffness = 204.1", "max_tension = 100.0"))
-    with pytest.raises(ValueError, match=r"tendons \[0, 1, 2\] have no stiffness"):
+    with pytest.raises(ValueError, match=r"tendon\(s\) 1 \(tendons\[0\]\), 2 \(tendons\[1\]\), 3 \(tendons\[2\]\) have no stiffness"):
         rigs.Rig.from_toml(tmp_path / "bad.toml")
 
 
