@@ -2,10 +2,10 @@
 
 import jax
 
-from .compiler import use_fast_compile_flags
+from . import compiler
 from .version import __version__ as __version__
 
-use_fast_compile_flags()
+compiler.use_fast_compile_flags()
 jax.config.update("jax_enable_x64", True)
 
 from . import checks, inputs, manipulation  # noqa: E402
