@@ -234,7 +234,22 @@ def force_scale(robot: Robot, act: Actuation, load: Loads, gravity):
     weight = jnp.linalg.norm(gravity) * _mass_moments(robot, act)[0]
     F = jnp.sum(act.tensions) + jnp.linalg.norm(load.tip_force) + jnp.linalg.norm(load.tip_moment) / L + weight
     F = F + jnp.sum(jnp.linalg.norm(load.point_force, axis=-1)) + jnp.sum(jnp.linalg.norm(load.point_moment, axis=-1)) / L
+    F = F + jnp.sum(_driven_tensions(robot, act)) if act.driven else F
     return jnp.maximum(F + jnp.linalg.norm(load.distributed_force) * L, 1e-3)
+
+
+def _driven_tensions(robot: Robot, act: Actuation):
+    """Typical tensions [N] of the displacement-driven tendons: each pulled tendon's delta over the
+    compliance of the straight robot to it alone, its own stretch l / EA in series with the bend
+    r^2 l / EI it makes (the base section's EI), (n_d,). A scale only: the tensions a pull makes
+    where the given tensions (a warm start's) are zero."""
+    i = np.asarray(act.driven)
+    offset = _tendon_fields(robot)[0][i]
+    l = rest_lengths(robot)[i]
+    EA = jnp.stack([jnp.asarray(jnp.inf if t.stiffness is None else t.stiffness, float) for t in robot.tendons])[i]
+    sec = robot.sections[0]
+    EI = sec.E * jnp.pi / 64 * (sec.outer_diameter**4 - sec.inner_diameter**4)
+    return jnp.maximum(act.displacements, 0.0) / (l / EA + offset**2 * l / EI)
 
 
 def _mass_moments(robot: Robot, act: Actuation):

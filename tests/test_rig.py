@@ -78,6 +78,29 @@ def servos(lab):
     return (amplitude[:, :, None] * np.cos(phi[:, :, None] - angles[None])).reshape(N, 9)
 
 
+@pytest.mark.parametrize("robot_case", ["v4, no pretension", "222 mm, E 10 GPa, gravity"])
+def test_large_pulls_at_zero_pretension_solve_from_the_straight_robot(lab, robot_case):
+    """Servo readings of +-15 mm on every tendon at once (tips up to 140 mm off the axis, tendons
+    going slack), each solved cold from the straight robot with the rig's solver: all converge.
+    The v4 robot at zero pretension, and a 222 mm one with its backbone at E = 10 GPa under
+    gravity across it."""
+    rig = rigs.replace(lab, {"pretension[*]": 0.0})
+    if robot_case.startswith("222"):
+        r, L = rig.robot, 0.222
+        tendons = tuple(dataclasses.replace(t, end=None if t.end is None else t.end * L / r.length) for t in r.tendons)
+        robot = tdct.Robot(length=L, sections=(dataclasses.replace(r.sections[0], end=L, E=10e9),), tendons=tendons)
+        rig = dataclasses.replace(rig, robot=robot)
+    else:
+        rig = dataclasses.replace(rig, g=0.0)
+    servos = np.random.default_rng(3).uniform(-15e-3, 15e-3, (16, 9))
+    n = rig.robot.n_tendons
+    for servo in servos:
+        act = tdct.Actuation(np.zeros(n), (), np.asarray(rig.displacements(servo)), tuple(range(n)))
+        sol = tdct.solve(rig.robot, act, gravity=rig.gravity, solver=RIG_SOLVER, throw=False)
+        assert sol.converged, (servo, int(sol.result), int(sol.iterations))
+    assert np.asarray(sol.slack).any()  # the last pose has slack tendons
+
+
 def test_rotation_vector_closed_form():
     t = 0.7
     rotation = jax.jit(rigs.rotation_matrix)
@@ -153,7 +176,9 @@ def test_rig_file_round_trip_and_errors(lab, tmp_path):
     with pytest.raises(ValueError, match=r"bad.toml: \[rig\]: Rig.scale = -1"):
         rigs.Rig.from_toml(tmp_path / "bad.toml")
     (tmp_path / "bad.toml").write_text(text.replace("stiffness = 204.1", "max_tension = 100.0"))
-    with pytest.raises(ValueError, match=r"tendon\(s\) 1 \(tendons\[0\]\), 2 \(tendons\[1\]\), 3 \(tendons\[2\]\) have no stiffness"):
+    with pytest.raises(
+        ValueError, match=r"tendon\(s\) 1 \(tendons\[0\]\), 2 \(tendons\[1\]\), 3 \(tendons\[2\]\) have no stiffness"
+    ):
         rigs.Rig.from_toml(tmp_path / "bad.toml")
 
 
