@@ -24,8 +24,9 @@ import numpy as np
 from tqdm import tqdm
 
 from . import rig as rigs
-from . import status
+from . import rod, status
 from .checks import check_integer, deprecated
+from .data import _error
 from .lm import covariance, levenberg_marquardt
 from .options import SolverOptions
 from .recording import Recording, check_tendons
@@ -78,6 +79,8 @@ class RigCalibration:
         history: the tip RMSE [m] (registration as fitted, no offset removed) at the start and
             after each accepted step.
         noise: residual standard deviation per coordinate [m].
+        left_out: the file lines of the samples left out of the fit: those that solve neither
+            from the straight robot nor from a neighbour in the sequence at the starting values.
         iterations, result, message: Levenberg-Marquardt's outcome (``converged``: result ==
             SUCCESS); an unconverged fit keeps its best values.
         seconds: wall time, compiles included.
@@ -93,6 +96,7 @@ class RigCalibration:
     after: dict
     history: tuple
     noise: float
+    left_out: tuple
     iterations: int
     result: int
     message: str
@@ -114,6 +118,7 @@ class RigCalibration:
             "after_mm": _mm(self.after),
             "history_rmse_mm": [1e3 * h for h in self.history],
             "noise_mm": 1e3 * self.noise,
+            "left_out_lines": list(self.left_out),
             "iterations": self.iterations,
             "converged": self.converged,
             "message": self.message,
@@ -124,7 +129,12 @@ class RigCalibration:
         """A text table: values with standard errors, the strongest correlations, the tip errors."""
         w = max(20, *(len(p) + 2 for p in self.params))
         lines = [f"{'value':<{w}}{'initial':>13}{'fitted':>13}{'std error':>12}"]
-        lines += [f"{p:<{w}}{self.initial[p]:>13.6g}{self.values[p]:>13.6g}{self.std_errors[p]:>12.3g}" for p in self.params]
+        stepped = self.iterations > 0 or self.converged  # a fit that never stepped has no errors to show
+        lines += [
+            f"{p:<{w}}{self.initial[p]:>13.6g}{self.values[p]:>13.6g}"
+            + (f"{self.std_errors[p]:>12.3g}" if stepped else f"{'-':>12}")
+            for p in self.params
+        ]
         i, j = np.triu_indices(len(self.params), 1)
         strong = sorted(zip(np.abs(self.correlation[i, j]), i, j, strict=True), reverse=True)[:5]
         if strong:
@@ -137,6 +147,9 @@ class RigCalibration:
             f"\ntip error, mean offset removed: RMSE {1e3 * b['rmse']:.2f} -> {1e3 * a['rmse']:.2f} mm "
             f"(median {1e3 * a['median']:.2f}, 95th percentile {1e3 * a['p95']:.2f} mm, {a['n']} samples)"
         )
+        if self.left_out:
+            shown = ", ".join(map(str, self.left_out[:10])) + (", ..." if len(self.left_out) > 10 else "")
+            lines.append(f"left out {len(self.left_out)} samples that did not solve at the starting values (lines {shown})")
         state = "converged" if self.converged else f"NOT converged: {self.message}"
         lines.append(f"{state} after {self.iterations} steps in {self.seconds:.1f} s")
         return "\n".join(lines)
@@ -147,9 +160,25 @@ def _mm(errors: dict) -> dict:
 
 
 def _servos(rig: rigs.Rig, rec: Recording) -> np.ndarray:
+    """The recording's servo readings [m], (n, n_t), checked against the rig: each pull shorter
+    than its tendon's rest length to its anchor (a reading beyond it is a unit slip, e.g. mm
+    read as m), named by file, line, column and value."""
     check_tendons(rec, rig.robot.n_tendons)
     if rec.displacements is None or rec.tip is None:
         raise ValueError(f"{rec.path}: a rig calibration needs displacement columns and tip columns")
+    pulls = np.asarray(jax.vmap(rig.displacements)(jnp.asarray(rec.displacements)))
+    rest = np.asarray(rod.rest_lengths(rig.robot))
+    beyond = np.argwhere(np.abs(pulls) >= rest)
+    if beyond.size:
+        row, k = beyond[0]
+        column, unit = [(name, u) for role, name, u in rec.columns if role == "displacements"][k]
+        raise _error(
+            rec.path,
+            int(rec.lines[row]),
+            f"column {column}: {1e3 * rec.displacements[row, k]:g} mm moves tendon {k + 1} by {1e3 * pulls[row, k]:g} mm, "
+            f"beyond its rest length {1e3 * rest[k]:g} mm to its anchor ({len(beyond)} such values): "
+            f"check the column's unit (read as {unit or 'm'})",
+        )
     return rec.displacements
 
 
@@ -198,7 +227,16 @@ def fit_recording(
     start = perf_counter()
     bar = tqdm(desc="calibrating", unit="step", disable=not progress, leave=False)
     bar.set_postfix_str("solving along the recording (compiling)")
-    tip, unknowns, _ = rigs.along(rig, servos, solver)
+    tip, unknowns, codes = _from_neighbours(rig, servos, solver)
+    keep = np.flatnonzero(codes == status.SUCCESS)
+    left_out = tuple(int(line) for line in np.asarray(recording.lines)[codes != status.SUCCESS])
+    if keep.size == 0:
+        raise status.ConvergenceError(
+            f"{recording.path}: no sample solves at the starting values (first code {int(codes[0])}): "
+            "check the robot file and the servo units",
+            int(codes[0]),
+        )
+    servos, measured, tip, unknowns = servos[keep], measured[keep], tip[keep], unknowns[keep]
     guesses = [unknowns]
     offset = np.mean(np.asarray(measured) - np.asarray(tip), axis=0)
     shifted = {f"translation[{i}]": float(rig.translation[i] + offset[i]) for i in range(3)}
@@ -241,6 +279,7 @@ def fit_recording(
         after=rigs.errors(measured + fit.aux.reshape(-1, 3), measured),
         history=tuple(history),
         noise=float(np.sqrt(s2)),
+        left_out=left_out,
         iterations=fit.iterations,
         result=fit.result,
         message=fit.message,
@@ -254,6 +293,19 @@ def calibrate_rig(rig: rigs.Rig, recording: Recording, params: Sequence[str] = R
     """Former name of ``tdct.calibrate(rig, recording, params)``."""
     deprecated("tdct.calibrate_rig", "tdct.calibrate(rig, recording, params)")
     return fit_recording(rig, recording, params, **options)
+
+
+def _from_neighbours(rig: rigs.Rig, servos, solver: SolverOptions):
+    """``rig.along`` the sequence, then the samples it could not reach along it again from the end
+    backward (from their neighbour after): tips, unknowns and codes (numpy)."""
+    tip, unknowns, codes = (np.asarray(a) for a in rigs.along(rig, servos, solver))
+    if np.any(codes != status.SUCCESS):
+        back = [np.asarray(a)[::-1] for a in rigs.along(rig, servos[::-1], solver)]
+        fixed = (codes != status.SUCCESS) & (back[2] == status.SUCCESS)
+        tip, unknowns, codes = (
+            np.where(fixed.reshape(-1, *[1] * (a.ndim - 1)), b, a) for a, b in zip((tip, unknowns, codes), back, strict=True)
+        )
+    return tip, unknowns, codes
 
 
 def _bounds(params, initial, bounds):

@@ -771,11 +771,12 @@ def plot_stiffness_map(stiffness, path: str | Path | None = None):
 
 
 @_styled
-def plot_prediction(prediction, calibration=None, path: str | Path | None = None, title: str | None = None, floor=None):
+def plot_prediction(prediction, calibration=None, path: str | Path | None = None, title: str | None = None, bound=None):
     """A held-out recording predicted (``calibrate_rig.predict``): per motion-pattern family, the
     measured tip path (dots) and the model's (line) seen along the measurement frame's z (x-y, mm);
     below, the error along the sequence (mean offset removed), and with ``calibration`` the tip
-    RMSE after each fit step. ``floor``: a repeatability floor [m] drawn as a line."""
+    RMSE after each fit step. ``bound``: the RMSE no model without memory goes below [m] (half the
+    distance between samples with equal servo values), drawn as a line."""
     plt = _pyplot()
     families = list(prediction.per_pattern)
     fig = plt.figure(figsize=(4.2 * max(len(families), 2), 8.2))
@@ -800,8 +801,8 @@ def plot_prediction(prediction, calibration=None, path: str | Path | None = None
     ax = fig.add_subplot(grid[1, :wide])
     err = np.linalg.norm(tips - measured, axis=1)
     ax.plot(err, lw=1.0, color="C0", label=f"model (RMSE {1e3 * prediction.errors['rmse']:.2f} mm)")
-    if floor is not None:
-        ax.axhline(1e3 * floor, color="C3", ls="--", lw=1.0, label=f"repeatability floor {1e3 * floor:.1f} mm")
+    if bound is not None:
+        ax.axhline(1e3 * bound, color="C3", ls="--", lw=1.0, label=f"bound without memory {1e3 * bound:.1f} mm RMS")
     starts = np.flatnonzero(np.r_[True, fam[1:] != fam[:-1]])
     for s in starts:
         ax.axvline(s, color="0.6", lw=0.6)

@@ -201,27 +201,30 @@ def read_dataset(path: str | os.PathLike) -> Dataset:
     if "train" not in spec:
         raise _error(path, 0, 'missing key train: the training recording, e.g. train = "train.csv"')
     roles = {k: spec[k] for k in ("displacements", "tensions", "insertions", "tip", "label", "time", "units") if k in spec}
+    fields = {k: v for k, v in roles.items() if k not in ("label", "time", "units")}
+    role_columns = _roles(path, **fields)
     named = [c for k in ROLES if k != "time" for c in roles.get(k, ())] + [roles[k] for k in ("label", "time") if k in roles]
     strays = [c for c in roles.get("units", {}) if c not in named]
     if strays:
         raise _error(path, 0, f"[units] names column(s) {strays} that the description does not read; columns read: {named}")
-    folder = path.parent
-    train_path, train = folder / spec["train"], _table(folder / spec["train"])
-    validation = None
-    if "validation" in spec:
-        val_path = folder / spec["validation"]
-        validation = _table(val_path)
-        _check_same_columns((train_path, train), (val_path, validation))
-    fields = {k: v for k, v in roles.items() if k not in ("label", "time", "units")}
-    role_columns = _roles(path, **fields)
     units = _units(path, roles.get("units"))
 
     def recording(p, table):
         return _recording(p, table, role_columns, roles.get("label"), roles.get("time"), units)
 
+    folder = path.parent
+    train_path = folder / spec["train"]
+    train = _table(train_path)
+    train_recording = recording(train_path, train)  # a column the description names but a file lacks: that file's error
+    validation = None
+    if "validation" in spec:
+        val_path = folder / spec["validation"]
+        validation = _table(val_path)
+        validation_recording = recording(val_path, validation)
+        _check_same_columns((train_path, train), (val_path, validation))
     return Dataset(
-        train=recording(train_path, train),
-        validation=None if validation is None else recording(val_path, validation),
+        train=train_recording,
+        validation=None if validation is None else validation_recording,
         robot=folder / spec["robot"] if "robot" in spec else None,
         description=path,
         roles=roles,

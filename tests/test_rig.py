@@ -211,9 +211,23 @@ def test_calibration_recovers_known_values(lab, truth, servos):
 
 
 @pytest.mark.slow
-def test_cli_calibrates_a_slice_end_to_end(tmp_path, capsys):
+def test_cli_calibrates_a_slice_end_to_end(tmp_path, capsys, monkeypatch):
     """``tdct calibrate --dataset`` on the first N samples of each file: the fitted robot file reads
-    back, the report's numbers agree with its prediction, and the fit lowers the training error."""
+    back, the report's numbers agree with its prediction, and the fit lowers the training error.
+    Samples that fail do not stop it: made to fail along the sequence, sample 5 is reached from its
+    neighbour after it, and sample 9, failing both ways, is left out and named by its file line."""
+    along = rigs.along
+
+    def failing(rig, servos, solver):
+        tip, x, codes = along(rig, servos, solver)
+        if np.array_equal(servos, train_servos):
+            return tip, x, codes.at[np.array([5, 9])].set(tdct.status.NEWTON_LIMIT)
+        if np.array_equal(servos, train_servos[::-1]):
+            return tip, x, codes.at[N - 1 - 9].set(tdct.status.NEWTON_LIMIT)
+        return tip, x, codes  # the validation file
+
+    train_servos = read_dataset(DATA / "dataset.toml").train.displacements[:N]
+    monkeypatch.setattr(rigs, "along", failing)
     for name, keep in (("train.csv", N), ("val.csv", N)):
         lines = (DATA / name).read_text().splitlines()[: keep + 1]
         (tmp_path / name).write_text("\n".join(lines) + "\n")
@@ -238,7 +252,8 @@ def test_cli_calibrates_a_slice_end_to_end(tmp_path, capsys):
     report = json.loads(capsys.readouterr().out)
     assert code in (0, 1)  # 1: stopped at --max-steps, its best values kept (the fit's accuracy: the test above)
     fit = report["fit"]
-    assert fit["after_mm"]["rmse"] < fit["before_mm"]["rmse"]
+    assert fit["left_out_lines"] == [11]  # sample 9: the file's header is line 1
+    assert fit["after_mm"]["rmse"] < fit["before_mm"]["rmse"] and fit["after_mm"]["n"] == N - 1
     fitted = rigs.Rig.from_toml(out / "fitted.toml")
     assert rigs.value(fitted, "pretension[0-2]") == pytest.approx(fit["values"]["pretension[0-2]"], rel=1e-12)
     data = read_dataset(tmp_path / "dataset.toml")
@@ -252,6 +267,7 @@ def test_cli_calibrates_a_slice_end_to_end(tmp_path, capsys):
     [
         (lambda t: t.replace('"servo_7_mm"]', '"servo_7_mm", "servo_7_mm"]'), "servo_7_mm"),
         (lambda t: t.replace('tip_z = "mm"\n', ""), "tip_z"),
+        (lambda t: t.replace('"tip_y", "tip_z"]', '"tip_y"]'), "tip needs 3 columns (x, y, z of the measured tip), got 2"),
     ],
 )
 def test_cli_bad_dataset_exits_2(tmp_path, capsys, edit, words):
@@ -260,6 +276,21 @@ def test_cli_bad_dataset_exits_2(tmp_path, capsys, edit, words):
     (tmp_path / "dataset.toml").write_text(edit((DATA / "dataset.toml").read_text()))
     assert cli.main(["calibrate", "--dataset", str(tmp_path / "dataset.toml"), "--quiet"]) == 2
     assert words in capsys.readouterr().err
+
+
+def test_cli_refuses_a_servo_reading_beyond_the_tendon_before_any_solve(tmp_path, capsys):
+    """A reading typed 1000 times too large (metres read as millimetres) names file, line, column and value."""
+    for name in ("val.csv", "robot.toml", "dataset.toml"):
+        shutil.copy(DATA / name, tmp_path)
+    lines = (DATA / "train.csv").read_text().splitlines()
+    header, row = lines[0].split(","), lines[4].split(",")
+    k = header.index("servo_3_mm")
+    row[k] = str(1000 * float(row[k]))
+    lines[4] = ",".join(row)
+    (tmp_path / "train.csv").write_text("\n".join(lines) + "\n")
+    assert cli.main(["calibrate", "--dataset", str(tmp_path / "dataset.toml"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "train.csv:5: column servo_3_mm:" in err and "moves tendon 2 by" in err and "beyond its rest length 60 mm" in err, err
 
 
 def test_a_sample_solves_by_multiple_shooting_where_the_solver_asks(lab, monkeypatch):
