@@ -8,8 +8,14 @@ data's equal-servo pairs (samples with equal servo values differ by 5.0 mm media
 friction and hysteresis; a model without memory predicts one tip for both, so its error on them
 is at least half that distance, about 3.1 mm RMS).
 
-Run: python benchmarks/ftdcr_calibration.py [--every N] [--max-steps K]
-Writes benchmarks/results/ftdcr_calibration.json, ftdcr_prediction.png and ftdcr_fitted.toml.
+The fit is `tdct calibrate --dataset data/ftdcr-v4/dataset.toml --every 4` (its default values to
+fit, the geometry step from the data set's single-tendon pulls first). With --start wrong it starts
+instead from a deliberately wrong description: each segment's tendon pattern turned by 180
+degrees plus a random +-30 degrees per tendon, no pretension, tendons 3 times as stiff, E doubled.
+
+Run: python benchmarks/ftdcr_calibration.py [--every N] [--max-steps K] [--start lab|wrong]
+Writes benchmarks/results/ftdcr_calibration.json (ftdcr_calibration_wrong.json with --start wrong),
+ftdcr_prediction.png and ftdcr_fitted.toml.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ import numpy as np
 from _common import write_result
 
 import tdct_jax as tdct
+from tdct_jax import rig as rigs
 from tdct_jax.calibrate_rig import predict
 from tdct_jax.plotting import plot_prediction
 from tdct_jax.recording import read_dataset
@@ -37,32 +44,24 @@ BASELINES_MM = {
     "equal-servo pairs' tip distance (median; RMS 6.2)": 5.0,
     "memoryless bound: half the pairs' distance (RMS)": 3.1,
 }
-PARAMS = (
-    "scale",
-    "pretension[0-2]",
-    "pretension[3-5]",
-    "pretension[6-8]",
-    "tendons[0-2].stiffness",
-    "tendons[3-5].stiffness",
-    "tendons[6-8].stiffness",
-    *(f"tendons[{i}].angle" for i in range(9)),
-    "rotation[0]",
-    "rotation[1]",
-    "translation[0]",
-    "translation[1]",
-    "translation[2]",
-)
-"""The servo scale; pretension and tendon stiffness per segment; every tendon's angle; the
-registration (rotation about the axis is the tendon angles' common part). The backbone's E stays
-at the lab's 50 GPa: gravity off (as in the lab's model, the rig's orientation unrecorded), E,
-tendon stiffness and pretension act only in ratio, and with gravity on its direction is not
-identifiable from this data (a trial fit: E correlated +1.00 with the pretensions)."""
+
+
+def wrong(lab: Rig, seed: int = 0) -> Rig:
+    """The lab's rig from a deliberately wrong description (module docstring)."""
+    rng = np.random.default_rng(seed)
+    values = {
+        f"tendons[{i}].angle": float(t.angle) + np.pi + np.radians(rng.uniform(-30, 30)) for i, t in enumerate(lab.robot.tendons)
+    }
+    values |= {f"tendons[{i}].stiffness": 3 * float(t.stiffness) for i, t in enumerate(lab.robot.tendons)}
+    values |= {"pretension[*]": 0.0, "sections[*].E": 2 * float(lab.robot.sections[0].E)}
+    return rigs.replace(lab, values)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--every", type=int, default=3, help="fit every Nth training sample (default 3)")
+    parser.add_argument("--every", type=int, default=4, help="fit every Nth training sample (default 4)")
     parser.add_argument("--max-steps", type=int, default=30, help="most Levenberg-Marquardt steps (default 30)")
+    parser.add_argument("--start", choices=("lab", "wrong"), default="lab", help="the lab's values, or a wrong description")
     args = parser.parse_args()
     load_before = os.getloadavg()
     data = read_dataset(DATA)
@@ -71,8 +70,9 @@ def main() -> None:
     before = predict(lab, data.validation)
     print(f"  RMSE {1e3 * before.errors['rmse']:.2f} mm")
     train = data.train.subset(slice(None, None, args.every))
+    start = lab if args.start == "lab" else wrong(lab)
     t = time.perf_counter()
-    fit = tdct.calibrate(lab, train, PARAMS, max_steps=args.max_steps, throw=False)
+    fit = tdct.calibrate(start, train, pulls=data.pulls, max_steps=args.max_steps, throw=False)  # the CLI's defaults
     fit_seconds = time.perf_counter() - t
     print(fit.summary())
     after = predict(fit.rig, data.validation)
@@ -82,16 +82,19 @@ def main() -> None:
         f"95th percentile {1e3 * e['p95']:.2f} mm; {1e3 * after.seconds_per_pose:.1f} ms per pose"
     )
     results = HERE / "results"
-    (results / "ftdcr_fitted.toml").write_text(fit.rig.to_toml())
+    suffix = "" if args.start == "lab" else "_wrong"
+    if args.start == "lab":
+        (results / "ftdcr_fitted.toml").write_text(fit.rig.to_toml())
     plot_prediction(
         after,
         fit,
-        results / "ftdcr_prediction.png",
+        results / f"ftdcr_prediction{suffix}.png",
         title=f"ftdcr-v4: val.csv predicted from a fit on train.csv (1 sample in {args.every})",
         bound=3.1e-3,
     )
     write_result(
-        results / "ftdcr_calibration.json",
+        results / f"ftdcr_calibration{suffix}.json",
+        start=args.start,
         load_average_before=load_before,
         load_average_after=os.getloadavg(),
         train_samples=len(train),

@@ -23,7 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from . import fields, status
-from .calibrate_rig import RIG_PARAMS, RigCalibration, fit_recording
+from .calibrate_rig import RigCalibration, fit_recording
 from .checks import check_integer
 from .data import Experiment, stack
 from .description import Robot
@@ -174,6 +174,7 @@ def calibrate(
     data: Sequence[Experiment] | Recording,
     params: Sequence[str] | None = None,
     *,
+    pulls: Recording | None = None,
     bounds: Mapping[str, tuple] | None = None,
     max_steps: int | None = None,
     xtol: float | None = None,
@@ -192,7 +193,8 @@ def calibrate(
       fields (default ``("sections[*].E",)``); see ``fit_shapes``. Returns a Calibration.
     - **a rig recording**: ``model`` a Rig, ``data`` a Recording (servo readings in, measured
       tips out; ``read_recording``, ``read_dataset``). Fits robot fields and rig values (default
-      ``calibrate_rig.RIG_PARAMS``), with ``bounds``; see ``calibrate_rig.fit_recording``.
+      ``calibrate_rig.default_params(rig)``), with ``bounds``, after a geometry step from
+      single-tendon ``pulls`` where given (``Dataset.pulls``); see ``calibrate_rig.fit_recording``.
       Returns a RigCalibration. Gravity is the rig's own value.
 
     ``max_steps``, ``xtol``, ``ftol`` (the fit's own limit and tolerances) and ``solver`` default
@@ -206,10 +208,9 @@ def calibrate(
         if gravity is not STANDARD_GRAVITY:
             raise TypeError("gravity: a recording's gravity is its rig's own (Rig.g, gravity_azimuth, gravity_elevation)")
         rig_options = dict(given, **({} if ftol is None else {"ftol": ftol}))
-        params = RIG_PARAMS if params is None else params
-        return fit_recording(model, data, params, bounds=bounds, progress=progress, throw=throw, **rig_options)
-    if bounds is not None or ftol is not None:
-        raise TypeError("bounds and ftol apply to a rig recording's fit (data a tdct.Recording)")
+        return fit_recording(model, data, params, pulls=pulls, bounds=bounds, progress=progress, throw=throw, **rig_options)
+    if bounds is not None or ftol is not None or pulls is not None:
+        raise TypeError("pulls, bounds and ftol apply to a rig recording's fit (data a tdct.Recording)")
     if not isinstance(model, Robot):
         raise TypeError(f"shapes are fitted on a robot: model must be a tdct.Robot, got {type(model).__name__}")
     params = ("sections[*].E",) if params is None else params

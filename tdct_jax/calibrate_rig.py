@@ -35,8 +35,27 @@ RIG_SOLVER = SolverOptions(steps=8)
 """Solver for recordings: 8 RK4 steps per interval between breakpoints moves the tips of the
 three-segment example by under 0.1 um against 40 steps, far below any motion capture's noise."""
 RIG_PARAMS = ("sections[*].E", "scale", "rotation[0]", "rotation[1]", "translation[0]", "translation[1]", "translation[2]")
-"""A default fit: the backbone's modulus, the servo scale and the registration (rotation about the
-robot axis is left to the tendon angles, with which it is degenerate)."""
+"""A small fit: the backbone's modulus, the servo scale and the registration (rotation about the
+robot axis is left to the tendon angles, with which it is degenerate). The default is
+``default_params``."""
+
+
+def default_params(rig: rigs.Rig) -> tuple:
+    """The default fit of a rig, for any robot: the servo scale; per segment (consecutive tendons
+    anchored at the same arc length) one pretension and one tendon stiffness; every tendon's
+    angle; the registration but its rotation about the robot's axis (the angles' common part).
+    The backbone's E stays: without gravity, E, the tendons' stiffness and their pretension act
+    only in ratio (and on the ftdcr-v4 recording, with gravity on, E correlates +1.00 with the
+    pretensions)."""
+    ends = [t.end for t in rig.robot.tendons]
+    groups, first = [], 0
+    for i in range(1, len(ends) + 1):
+        if i == len(ends) or ends[i] != ends[first]:
+            groups.append(f"{first}-{i - 1}" if i - 1 > first else f"{first}")
+            first = i
+    params = ["scale", *(f"pretension[{g}]" for g in groups), *(f"tendons[{g}].stiffness" for g in groups)]
+    params += [f"tendons[{i}].angle" for i in range(len(ends))]
+    return (*params, "rotation[0]", "rotation[1]", "translation[0]", "translation[1]", "translation[2]")
 
 
 def _values(x, params) -> dict:
@@ -81,6 +100,8 @@ class RigCalibration:
         noise: residual standard deviation per coordinate [m].
         left_out: the file lines of the samples left out of the fit: those that solve neither
             from the straight robot nor from a neighbour in the sequence at the starting values.
+        geometry: the geometry step's findings (``identify_geometry``), or None without pulls;
+            ``initial`` holds the values after it.
         iterations, result, message: Levenberg-Marquardt's outcome (``converged``: result ==
             SUCCESS); an unconverged fit keeps its best values.
         seconds: wall time, compiles included.
@@ -97,6 +118,7 @@ class RigCalibration:
     history: tuple
     noise: float
     left_out: tuple
+    geometry: Geometry | None
     iterations: int
     result: int
     message: str
@@ -119,6 +141,7 @@ class RigCalibration:
             "history_rmse_mm": [1e3 * h for h in self.history],
             "noise_mm": 1e3 * self.noise,
             "left_out_lines": list(self.left_out),
+            "geometry": None if self.geometry is None else self.geometry.to_dict(),
             "iterations": self.iterations,
             "converged": self.converged,
             "message": self.message,
@@ -128,7 +151,12 @@ class RigCalibration:
     def summary(self) -> str:
         """A text table: values with standard errors, the strongest correlations, the tip errors."""
         w = max(20, *(len(p) + 2 for p in self.params))
-        lines = [f"{'value':<{w}}{'initial':>13}{'fitted':>13}{'std error':>12}"]
+        lines = []
+        if self.geometry is not None:
+            g = self.geometry
+            found = ", ".join("-" if np.isnan(a) else f"{np.degrees(a):.1f}" for a in g.angles)
+            lines.append(f"geometry from single-tendon pulls: tendon angles [deg] {found}; servo sign {g.sign:+.0f}\n")
+        lines.append(f"{'value':<{w}}{'initial':>13}{'fitted':>13}{'std error':>12}")
         stepped = self.iterations > 0 or self.converged  # a fit that never stepped has no errors to show
         lines += [
             f"{p:<{w}}{self.initial[p]:>13.6g}{self.values[p]:>13.6g}"
@@ -182,11 +210,89 @@ def _servos(rig: rigs.Rig, rec: Recording) -> np.ndarray:
     return rec.displacements
 
 
+PULL_MARGIN = 0.5e-3
+"""A sample is a single-tendon pull when its pulled tendon's servo reading exceeds every other
+tendon's by more than this [m]."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Geometry:
+    """What ``identify_geometry`` found (SI units, angles in rad).
+
+    Attributes:
+        angles: each tendon's angle identified from its pulls, (n_t,), NaN for a tendon pulled
+            alone fewer than twice (its angle kept).
+        before: the angles the rig had.
+        sign: the servo sign, +1 where a positive reading pulls, -1 where a negative one does.
+        samples: how many samples pulled each tendon alone, (n_t,).
+    """
+
+    angles: np.ndarray
+    before: np.ndarray
+    sign: float
+    samples: np.ndarray
+
+    def to_dict(self) -> dict:
+        deg = lambda a: [None if np.isnan(x) else round(float(np.degrees(x)), 3) for x in a]  # noqa: E731
+        return {
+            "angles_deg": deg(self.angles),
+            "before_deg": deg(self.before),
+            "sign": self.sign,
+            "samples": self.samples.tolist(),
+        }
+
+
+def identify_geometry(rig: rigs.Rig, pulls: Recording) -> tuple[rigs.Rig, Geometry]:
+    """The geometry step of a rig calibration, from a recording of single-tendon pulls: each
+    tendon's angle and the servo sign, with no solve and no start to be near (angles wrong by
+    180 degrees are found as readily as right ones).
+
+    A tendon pulled alone bends the robot toward its own side, so the tip moves, across the
+    robot's axis, in the direction of the tendon's angle. For each sign of the servo readings, the
+    samples where one tendon's reading exceeds every other's by ``PULL_MARGIN`` are its pulls; the
+    sign whose pulls move the tip farthest is the servo's (relative to the rig's ``sign``). Each
+    tendon's angle is the direction of the sum of its pulls' tip motions from its least pull (two
+    pulls at least: a rest pose would carry the pretensions' own bend), taken in the robot's base
+    frame through the rig's registration ``rotation`` (so a rotation about the axis is carried by
+    the angles). Gravity across the robot tilts the motions a little:
+    the calibration that follows refines the angles it fits.
+
+    Returns:
+        The rig with those angles and its servo sign, and the Geometry found.
+    """
+    servos, tips = _servos(rig, pulls), np.asarray(pulls.tip)
+    R = np.asarray(rigs.rotation_matrix(jnp.asarray(rig.rotation)))
+    across = (tips @ R)[:, :2]  # R^T tip, across the axis
+    n, k = servos.shape
+    found = []
+    for sign in (1.0, -1.0):
+        s = sign * servos
+        pulled = np.argmax(s, axis=1)
+        others = np.where(np.arange(k)[None] == pulled[:, None], -np.inf, s).max(axis=1)
+        amount = s[np.arange(n), pulled]
+        alone = amount - others > PULL_MARGIN
+        spread = sum(np.ptp(across[alone & (pulled == i)], axis=0).sum() for i in range(k) if np.any(alone & (pulled == i)))
+        found.append((spread, sign, pulled, alone, amount))
+    _, sign, pulled, alone, amount = max(found, key=lambda f: f[0])
+    before = np.array([float(t.angle) for t in rig.robot.tendons])
+    angles, samples = np.full(k, np.nan), np.zeros(k, int)
+    for i in range(k):
+        mine = alone & (pulled == i)
+        samples[i] = np.count_nonzero(mine)
+        if samples[i] > 1:
+            least = np.flatnonzero(mine)[np.argmin(amount[mine])]
+            v = (across[mine] - across[least]).sum(axis=0)
+            angles[i] = np.arctan2(v[1], v[0])
+    values = {f"tendons[{i}].angle": float(angles[i]) for i in range(k) if samples[i] > 1}
+    return dataclasses.replace(rigs.replace(rig, values), sign=sign * float(rig.sign)), Geometry(angles, before, sign, samples)
+
+
 def fit_recording(
     rig: rigs.Rig,
     recording: Recording,
-    params: Sequence[str] = RIG_PARAMS,
+    params: Sequence[str] | None = None,
     *,
+    pulls: Recording | None = None,
     bounds: Mapping[str, tuple] | None = None,
     max_steps: int = 40,
     xtol: float = 1e-6,
@@ -201,9 +307,13 @@ def fit_recording(
     Args:
         rig: the robot on its rig with the starting values and every value not fitted.
         recording: servo readings (``displacements``) and measured tips (``recording.py``).
-        params: names to fit (``rig.py``; robot fields as in ``fields.py``, ranges ``[a-b]``).
-            Fitted ``translation`` components start at the mean offset between the measured tips
-            and the model's at the start (their least-squares value there).
+        params: names to fit (``rig.py``; robot fields as in ``fields.py``, ranges ``[a-b]``);
+            None: ``default_params(rig)``. Fitted ``translation`` components start at the mean
+            offset between the measured tips and the model's at the start (their least-squares
+            value there).
+        pulls: (optional) a recording of single-tendon pulls: the geometry step
+            (``identify_geometry``: each tendon's angle and the servo sign) comes first, so the
+            fit may start from a nominal description whose angles are far off.
         bounds: {name: (lo, hi)} in SI units; pretensions are kept >= 0 unless given.
         max_steps: most Levenberg-Marquardt trial steps. xtol: converged when the bounded
             Gauss-Newton step moves no coordinate by more than this (relative for values fitted
@@ -217,13 +327,16 @@ def fit_recording(
         ValueError: unknown or repeated names, bounds that do not hold the start, a recording that
             does not fit the robot.
     """
-    params = (params,) if isinstance(params, str) else tuple(params)
+    params = default_params(rig) if params is None else (params,) if isinstance(params, str) else tuple(params)
     if not params or len(set(params)) != len(params):
         raise ValueError(f"params = {params!r} must name at least one value, each once")
     for p in params:
         rigs.check_name(rig, p)
     max_steps = check_integer("max_steps", max_steps)
     servos, measured = jnp.asarray(_servos(rig, recording)), jnp.asarray(recording.tip)
+    geometry = None
+    if pulls is not None:
+        rig, geometry = identify_geometry(rig, pulls)
     start = perf_counter()
     bar = tqdm(desc="calibrating", unit="step", disable=not progress, leave=False)
     bar.set_postfix_str("solving along the recording (compiling)")
@@ -280,6 +393,7 @@ def fit_recording(
         history=tuple(history),
         noise=float(np.sqrt(s2)),
         left_out=left_out,
+        geometry=geometry,
         iterations=fit.iterations,
         result=fit.result,
         message=fit.message,

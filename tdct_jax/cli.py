@@ -345,8 +345,8 @@ def _parser() -> argparse.ArgumentParser:
     )
     k.add_argument(
         "--params",
-        help="comma-separated fields to fit (default sections[*].E; with --dataset "
-        "sections[*].E, scale, rotation[0-1], translation[0-2]; names: docs/recordings.md)",
+        help="comma-separated fields to fit (default sections[*].E; with --dataset the servo scale, each segment's "
+        "pretension and tendon stiffness, every tendon angle and the registration; names: docs/recordings.md)",
     )
     k.add_argument("--every", type=int, default=1, help="with --dataset: fit every Nth training sample (default 1: all)")
     k.add_argument("--out", metavar="DIR", help="with --dataset: write fitted.toml, report.json and prediction.png into DIR")
@@ -705,7 +705,7 @@ def _names(text: str) -> tuple:
 
 def _calibrate_rig_command(args) -> int:
     """``tdct calibrate --dataset``: the rig fitted to the train file, the validation file predicted."""
-    from .calibrate_rig import RIG_PARAMS, RIG_SOLVER, fit_recording, predict
+    from .calibrate_rig import RIG_SOLVER, fit_recording, predict
     from .plotting import plot_prediction
     from .recording import read_dataset
     from .rig import Rig
@@ -719,12 +719,14 @@ def _calibrate_rig_command(args) -> int:
         raise ValueError(f"{data.description}: names no robot file; give one with --robot")
     rig = Rig.from_toml(robot_file)
     solver = dataclasses.replace(RIG_SOLVER, max_iter=args.max_iter)
-    params = _names(args.params) if args.params else RIG_PARAMS
+    params = _names(args.params) if args.params else None
     out = Path(args.out) if args.out else None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
     train = data.train.subset(slice(None, None, args.every))
-    fit = fit_recording(rig, train, params, max_steps=args.max_steps, solver=solver, progress=not args.quiet, throw=False)
+    fit = fit_recording(
+        rig, train, params, pulls=data.pulls, max_steps=args.max_steps, solver=solver, progress=not args.quiet, throw=False
+    )
     report = {"dataset": str(data.description), "robot": str(robot_file), "train_samples": len(train), "fit": fit.to_dict()}
     prediction = None
     if data.validation is not None:

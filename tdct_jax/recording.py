@@ -67,7 +67,19 @@ ROLES = {
 """The roles of numeric columns, in the order ``Recording.columns`` lists them, and the units each allows."""
 SUFFIX = re.compile(r"_(mm|um|m|N|deg|rad|s)$")
 PER_SAMPLE = ("labels", "time", "displacements", "tensions", "insertions", "tip", "lines")
-DATASET_KEYS = ("robot", "train", "validation", "label", "time", "displacements", "tensions", "insertions", "tip", "units")
+DATASET_KEYS = (
+    "robot",
+    "train",
+    "validation",
+    "pulls",
+    "label",
+    "time",
+    "displacements",
+    "tensions",
+    "insertions",
+    "tip",
+    "units",
+)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -123,6 +135,9 @@ class Dataset:
     Attributes:
         train: the recording to fit on.
         validation: the held-out recording, with the same columns, or None.
+        pulls: a recording of single-tendon pulls (each tendon pulled alone, the others let go),
+            with the same columns, or None: the geometry step of a rig calibration
+            (``calibrate_rig.identify_geometry``).
         robot: the robot file the description names, relative to it resolved (not opened), or None.
         description: the TOML description.
         roles: ``read_recording``'s keyword arguments from the description (``read`` uses them).
@@ -133,6 +148,7 @@ class Dataset:
     robot: Path | None
     description: Path
     roles: dict = dataclasses.field(default_factory=dict)
+    pulls: Recording | None = None
 
     def read(self, path: str | os.PathLike) -> Recording:
         """Another recording with the description's columns and units, ``path`` relative to the description."""
@@ -222,12 +238,19 @@ def read_dataset(path: str | os.PathLike) -> Dataset:
         validation = _table(val_path)
         validation_recording = recording(val_path, validation)
         _check_same_columns((train_path, train), (val_path, validation))
+    pulls = None
+    if "pulls" in spec:
+        pulls_path = folder / spec["pulls"]
+        pulls_table = _table(pulls_path)
+        pulls = recording(pulls_path, pulls_table)
+        _check_same_columns((train_path, train), (pulls_path, pulls_table), "pulls")
     return Dataset(
         train=train_recording,
         validation=None if validation is None else validation_recording,
         robot=folder / spec["robot"] if "robot" in spec else None,
         description=path,
         roles=roles,
+        pulls=pulls,
     )
 
 
@@ -385,14 +408,14 @@ def _unit(path: Path, line: int, role: str, name: str, stated: str | None) -> st
     return unit
 
 
-def _check_same_columns(train: tuple, validation: tuple) -> None:
-    (train_path, a), (val_path, b) = train, validation
+def _check_same_columns(train: tuple, other: tuple, what: str = "validation") -> None:
+    (train_path, a), (val_path, b) = train, other
     only_train = [n for n in a.names if n not in b.names]
     only_val = [n for n in b.names if n not in a.names]
     if only_train or only_val:
         raise _error(
             val_path,
             b.line,
-            f"the validation file's columns differ from the training file {train_path}'s: only in {train_path.name}: "
+            f"the {what} file's columns differ from the training file {train_path}'s: only in {train_path.name}: "
             f"{only_train}; only in {val_path.name}: {only_val}; both files must have the same columns",
         )

@@ -58,7 +58,8 @@ class Rig:
 
     Attributes:
         robot: a Robot whose tendons all have a ``stiffness`` (EA [N]).
-        scale: servo reading to tendon displacement [1].
+        scale: servo reading to tendon displacement [1], > 0.
+        sign: +1 where a positive servo reading pulls its tendon, -1 where a negative one does.
         pretension: each tendon's tension in the straight robot at servo 0 [N], (n_t,).
         rotation: rotation vector of the robot base frame in the measurement frame [rad], (3,).
         translation: the robot base in the measurement frame [m], (3,).
@@ -68,6 +69,7 @@ class Rig:
 
     robot: Robot
     scale: float = 1.0
+    sign: float = 1.0
     pretension: object = None
     rotation: object = (0.0, 0.0, 0.0)
     translation: object = (0.0, 0.0, 0.0)
@@ -92,11 +94,19 @@ class Rig:
             # float64 arrays however given (a Python float is weakly typed): one compiled program
             **{
                 name: as_array(f"Rig.{name}", getattr(self, name), () if is_concrete(getattr(self, name)) else None, unit=unit)
-                for name, unit in (("scale", ""), ("gravity_azimuth", " rad"), ("gravity_elevation", " rad"), ("g", " m/s^2"))
+                for name, unit in (
+                    ("scale", ""),
+                    ("sign", ""),
+                    ("gravity_azimuth", " rad"),
+                    ("gravity_elevation", " rad"),
+                    ("g", " m/s^2"),
+                )
             },
         )
         check_range("Rig.pretension", self.pretension, 0.0, unit=" N")
         check_range("Rig.scale", self.scale, 0.0, lo_open=True)
+        if is_concrete(self.sign) and float(self.sign) not in (1.0, -1.0):
+            raise ValueError(f"Rig.sign = {float(self.sign):g} must be +1 (a positive servo reading pulls) or -1")
         check_range("Rig.g", self.g, 0.0, unit=" m/s^2")
 
     @classmethod
@@ -111,7 +121,7 @@ class Rig:
         data = read_toml(path, "robot file")
         robot = Robot.from_table(data, path)
         table = data.get("rig", {})
-        keys = {"scale": 1.0, "pretension": None, "rotation_deg": (0.0, 0.0, 0.0), "translation": (0.0, 0.0, 0.0)}
+        keys = {"scale": 1.0, "sign": 1, "pretension": None, "rotation_deg": (0.0, 0.0, 0.0), "translation": (0.0, 0.0, 0.0)}
         keys |= {"gravity_azimuth_deg": 0.0, "gravity_elevation_deg": -90.0, "g": STANDARD_G}
         unknown = sorted(set(table) - set(keys)) if isinstance(table, dict) else ["(not a table)"]
         if unknown:
@@ -121,6 +131,7 @@ class Rig:
             return cls(
                 robot,
                 scale=v["scale"],
+                sign=v["sign"],
                 pretension=v["pretension"],
                 rotation=np.radians(np.asarray(v["rotation_deg"], float)),
                 translation=v["translation"],
@@ -139,6 +150,7 @@ class Rig:
                 "",
                 "[rig]",
                 f"scale = {float(self.scale)!r}",
+                f"sign = {int(self.sign)}                          # +1: a positive servo reading pulls",
                 f"pretension = {[float(x) for x in np.asarray(self.pretension)]!r}          # [N]",
                 f"rotation_deg = {[float(x) for x in deg(np.asarray(self.rotation))]!r}     # rotation vector",
                 f"translation = {[float(x) for x in np.asarray(self.translation)]!r}      # [m]",
@@ -158,7 +170,7 @@ class Rig:
     def displacements(self, servo):
         """Commanded tendon displacements [m] for servo readings [m], (..., n_t)."""
         EA = jnp.stack([jnp.asarray(t.stiffness, float) for t in self.robot.tendons])
-        return self.scale * servo + self.pretension * rod.rest_lengths(self.robot) / EA
+        return self.sign * self.scale * servo + self.pretension * rod.rest_lengths(self.robot) / EA
 
     def to_measured(self, p):
         """Points p (..., 3) in the robot base frame, in the measurement frame."""

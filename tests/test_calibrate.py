@@ -104,7 +104,7 @@ def test_calibrate_takes_shapes_on_a_robot_and_a_recording_on_its_rig(robot, mea
         tdct.calibrate(robot, recording)
     with pytest.raises(TypeError, match="shapes are fitted on a robot: model must be a tdct.Robot, got Rig"):
         tdct.calibrate(rig, measured)
-    with pytest.raises(TypeError, match="bounds and ftol apply to a rig recording's fit"):
+    with pytest.raises(TypeError, match="pulls, bounds and ftol apply to a rig recording's fit"):
         tdct.calibrate(robot, measured, bounds={"sections[*].E": (1e5, 1e7)})
 
 

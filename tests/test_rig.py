@@ -18,7 +18,7 @@ import pytest
 import tdct_jax as tdct
 from tdct_jax import cli
 from tdct_jax import rig as rigs
-from tdct_jax.calibrate_rig import RIG_SOLVER, predict, synthesize_recording
+from tdct_jax.calibrate_rig import RIG_SOLVER, identify_geometry, predict, synthesize_recording
 from tdct_jax.recording import read_dataset
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "ftdcr-v4"
@@ -99,6 +99,35 @@ def test_large_pulls_at_zero_pretension_solve_from_the_straight_robot(lab, robot
         sol = tdct.solve(rig.robot, act, gravity=rig.gravity, solver=RIG_SOLVER, throw=False)
         assert sol.converged, (servo, int(sol.result), int(sol.iterations))
     assert np.asarray(sol.slack).any()  # the last pose has slack tendons
+
+
+def test_geometry_from_single_tendon_pulls_from_any_start(lab, truth):
+    """Pulls made by a known rig whose servos read negative when they pull (sign -1): each tendon
+    pulled alone (1, 2, 3 mm, the others let go 10 mm, as in the v4 pulls), weightless. From a start whose tendon
+    patterns are turned by 180 degrees plus up to +-30 degrees per tendon, with zero pretension,
+    tendons 3 times as stiff and E doubled, the geometry step finds every angle, the registration's
+    rotation about the axis (0.1 rad, not known to it) carried in the angles, and the servo sign."""
+    known = dataclasses.replace(truth, sign=-1.0, g=0.0, rotation=np.array([0.0, 0.0, 0.1]))
+    rows = [np.zeros(9)]
+    for i in range(9):
+        for pull in (1e-3, 2e-3, 3e-3):
+            row = np.full(9, 10e-3)
+            row[i] = -pull
+            rows.append(row)
+    pulls = synthesize_recording(known, np.array(rows))
+    rng = np.random.default_rng(11)
+    wrong = {
+        f"tendons[{i}].angle": float(t.angle) + np.pi + np.radians(rng.uniform(-30, 30)) for i, t in enumerate(lab.robot.tendons)
+    }
+    wrong |= {"pretension[*]": 0.0, "sections[*].E": 2 * float(lab.robot.sections[0].E)}
+    wrong |= {f"tendons[{i}].stiffness": 3 * float(t.stiffness) for i, t in enumerate(lab.robot.tendons)}
+    start = rigs.replace(lab, wrong)
+    found, geometry = identify_geometry(start, pulls)
+    assert geometry.sign == -1.0 and float(found.sign) == -1.0 and geometry.samples.tolist() == [3] * 9
+    turned = np.array([float(t.angle) for t in known.robot.tendons]) + 0.1  # the rotation about the axis
+    error = np.angle(np.exp(1j * (geometry.angles - turned)))
+    assert np.degrees(np.abs(error)).max() < 0.05, np.degrees(error)
+    assert [float(t.angle) for t in found.robot.tendons] == pytest.approx(geometry.angles.tolist(), abs=0)
 
 
 def test_rotation_vector_closed_form():
@@ -228,7 +257,7 @@ def test_cli_calibrates_a_slice_end_to_end(tmp_path, capsys, monkeypatch):
 
     train_servos = read_dataset(DATA / "dataset.toml").train.displacements[:N]
     monkeypatch.setattr(rigs, "along", failing)
-    for name, keep in (("train.csv", N), ("val.csv", N)):
+    for name, keep in (("train.csv", N), ("val.csv", N), ("tendon_pull.csv", 200)):
         lines = (DATA / name).read_text().splitlines()[: keep + 1]
         (tmp_path / name).write_text("\n".join(lines) + "\n")
     shutil.copy(DATA / "robot.toml", tmp_path)
@@ -271,7 +300,7 @@ def test_cli_calibrates_a_slice_end_to_end(tmp_path, capsys, monkeypatch):
     ],
 )
 def test_cli_bad_dataset_exits_2(tmp_path, capsys, edit, words):
-    for name in ("train.csv", "val.csv", "robot.toml"):
+    for name in ("train.csv", "val.csv", "robot.toml", "tendon_pull.csv"):
         shutil.copy(DATA / name, tmp_path)
     (tmp_path / "dataset.toml").write_text(edit((DATA / "dataset.toml").read_text()))
     assert cli.main(["calibrate", "--dataset", str(tmp_path / "dataset.toml"), "--quiet"]) == 2
@@ -280,7 +309,7 @@ def test_cli_bad_dataset_exits_2(tmp_path, capsys, edit, words):
 
 def test_cli_refuses_a_servo_reading_beyond_the_tendon_before_any_solve(tmp_path, capsys):
     """A reading typed 1000 times too large (metres read as millimetres) names file, line, column and value."""
-    for name in ("val.csv", "robot.toml", "dataset.toml"):
+    for name in ("val.csv", "robot.toml", "dataset.toml", "tendon_pull.csv"):
         shutil.copy(DATA / name, tmp_path)
     lines = (DATA / "train.csv").read_text().splitlines()
     header, row = lines[0].split(","), lines[4].split(",")
