@@ -30,8 +30,8 @@ from _common import write_result
 
 import tdct_jax as tdct
 from tdct_jax import rig as rigs
-from tdct_jax.calibrate_rig import predict
-from tdct_jax.plotting import plot_prediction
+from tdct_jax.calibrate_rig import equal_servo_pairs, pair_score, predict
+from tdct_jax.plotting import plot_pairs, plot_prediction
 from tdct_jax.recording import read_dataset
 from tdct_jax.rig import Rig
 
@@ -92,8 +92,19 @@ def main() -> None:
         title=f"ftdcr-v4: val.csv predicted from a fit on train.csv (1 sample in {args.every})",
         bound=3.1e-3,
     )
+    print("the equal-servo pairs: both recordings predicted, each in order ...")
+    train_all = predict(fit.rig, data.train)
+    pairs = equal_servo_pairs(data.train, data.validation)
+    predicted = np.vstack([train_all.tips, after.tips])
+    measured = np.vstack([train_all.measured, after.measured])
+    score = pair_score(predicted, measured, pairs)
+    print(f"  share of the pairs' measured tip difference predicted: {score:.3f} ({len(pairs)} pairs)")
+    plot_pairs(
+        predicted, measured, pairs, results / f"ftdcr_pairs{suffix}.png", title="ftdcr-v4: samples with equal servo values"
+    )
     write_result(
         results / f"ftdcr_calibration{suffix}.json",
+        pairs=dict(count=len(pairs), share_predicted=score, goal=0.5),
         start=args.start,
         load_average_before=load_before,
         load_average_after=os.getloadavg(),

@@ -497,6 +497,30 @@ def predict(rig: rigs.Rig, recording: Recording, *, solver: SolverOptions = RIG_
     return Prediction(tips, measured, recording.patterns(), codes, errors, per_pattern, seconds)
 
 
+EQUAL_SERVOS = 0.1e-3
+"""Two samples have equal servo values when every reading agrees within this [m]."""
+
+
+def equal_servo_pairs(*recordings: Recording, tol: float = EQUAL_SERVOS) -> np.ndarray:
+    """The pairs of samples, over the recordings taken together (indices into their
+    concatenation, (k, 2), first < second), whose servo readings all agree within ``tol`` [m]:
+    a model without memory gives both one tip, so their measured tip difference is friction's and
+    hysteresis's."""
+    servos = np.vstack([r.displacements for r in recordings])
+    close = np.abs(servos[:, None] - servos[None]).max(axis=-1) < tol
+    return np.argwhere(np.triu(close, 1))
+
+
+def pair_score(predicted, measured, pairs) -> float:
+    """How much of the measured tip difference within equal-servo ``pairs`` a model predicts:
+    1 - sum |d_measured - d_predicted|^2 / sum |d_measured|^2 (1: all of it; 0: none, as for any
+    model without memory, which predicts d = 0)."""
+    predicted, measured = np.asarray(predicted), np.asarray(measured)
+    d_m = measured[pairs[:, 1]] - measured[pairs[:, 0]]
+    d_p = predicted[pairs[:, 1]] - predicted[pairs[:, 0]]
+    return float(1 - np.sum((d_m - d_p) ** 2) / np.sum(d_m**2))
+
+
 def _family(pattern: str) -> str:
     head, _, tail = pattern.rpartition("_dir")
     return head if head and tail.isdigit() else pattern

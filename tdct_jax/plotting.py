@@ -822,6 +822,38 @@ def plot_prediction(prediction, calibration=None, path: str | Path | None = None
 
 
 @_styled
+def plot_pairs(predicted, measured, pairs, path: str | Path | None = None, title: str | None = None):
+    """Samples with equal servo values (``calibrate_rig.equal_servo_pairs``): each pair's measured
+    tip difference against the model's, component by component (mm), and their sizes. A model
+    without memory predicts one tip for both samples: its points lie on the horizontal axis."""
+    from .calibrate_rig import pair_score
+
+    plt = _pyplot()
+    predicted, measured = 1e3 * np.asarray(predicted), 1e3 * np.asarray(measured)
+    d_m = measured[pairs[:, 1]] - measured[pairs[:, 0]]
+    d_p = predicted[pairs[:, 1]] - predicted[pairs[:, 0]]
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4.2))
+    for k, (axis, colour) in enumerate(zip("xyz", ("C0", "C2", "C1"), strict=True)):
+        ax.plot(d_m[:, k], d_p[:, k], "o", ms=3, color=colour, alpha=0.7, label=axis)
+    lim = np.abs(d_m).max() * 1.05
+    ax.plot([-lim, lim], [-lim, lim], "k--", lw=0.8, label="predicted = measured")
+    ax.set_xlabel("measured tip difference [mm]")
+    ax.set_ylabel("predicted tip difference [mm]")
+    ax.set_aspect("equal")
+    ax.legend(fontsize=8)
+    score = pair_score(predicted, measured, pairs)
+    ax.set_title(f"{len(pairs)} equal-servo pairs: share predicted {score:.2f}", fontsize=10)
+    bx.hist(np.linalg.norm(d_m, axis=1), bins=30, alpha=0.6, label="measured")
+    bx.hist(np.linalg.norm(d_p, axis=1), bins=30, alpha=0.6, label="predicted")
+    bx.set_xlabel("tip distance within a pair [mm]")
+    bx.set_ylabel("pairs")
+    bx.legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    return _finish(fig, path)
+
+
+@_styled
 def plot_contact_press(res: dict, path: str | Path | None = None, title: str | None = None):
     """The tip pressed on a table against insertion (``paper.contact_press``): the normal force on
     the table, and the tip compliance in contact beside the free robot's, along x (across the

@@ -158,3 +158,16 @@ def test_plot_robot_draws_the_interval_layout_both_sides_of_each_breakpoint():
     np.testing.assert_allclose(upper[:12, 1], 10.0)  # section 1 to its end, the left side of s = 100 mm
     np.testing.assert_allclose(upper[12:, 1], 5.0)  # section 2 from the right side on
     matplotlib.pyplot.close(fig)
+
+
+def test_pairs_plot_puts_a_memoryless_model_on_the_axis_and_states_its_share():
+    """Equal-servo pairs: a model predicting one tip per pair scores 0 and its points lie at zero
+    predicted difference; the measured tips themselves score 1."""
+    measured = np.array([[0.0, 0.0, 0.1], [0.003, -0.002, 0.1], [0.01, 0.0, 0.1], [0.012, 0.004, 0.099]])
+    pairs = np.array([[0, 1], [2, 3]])
+    memoryless = np.array([[0.001, 0.0, 0.1], [0.001, 0.0, 0.1], [0.011, 0.0, 0.1], [0.011, 0.0, 0.1]])
+    fig = plotting.plot_pairs(memoryless, measured, pairs)
+    ax = fig.axes[0]
+    assert "share predicted 0.00" in ax.get_title()
+    assert all(np.allclose(line.get_ydata(), 0.0) for line in ax.lines[:3])  # x, y, z: no predicted difference
+    assert "share predicted 1.00" in plotting.plot_pairs(measured, measured, pairs).axes[0].get_title()

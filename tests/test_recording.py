@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tdct_jax.calibrate_rig import equal_servo_pairs, pair_score
 from tdct_jax.recording import check_tendons, read_dataset, read_recording
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "ftdcr-v4"
@@ -102,6 +103,11 @@ def test_baselines_of_the_data_readme(dataset):
     gap_mm = 1000 * np.linalg.norm(tip[i] - tip[j], axis=1)
     assert len(i) == 147
     assert abs(np.median(gap_mm) - 5.0) < README_TOLERANCE and abs(np.sqrt(np.mean(gap_mm**2)) - 6.2) < README_TOLERANCE
+    # the library's own pairs and score: the same pairs; the measured tips score 1, a model that
+    # predicts one tip for both samples of every pair (here: one tip for all) 0
+    pairs = equal_servo_pairs(dataset.train, dataset.validation)
+    assert pairs.tolist() == np.column_stack([i, j]).tolist()
+    assert pair_score(tip, tip, pairs) == 1.0 and pair_score(np.zeros_like(tip), tip, pairs) == 0.0
 
 
 def test_check_tendons(dataset):
