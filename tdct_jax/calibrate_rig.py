@@ -6,8 +6,9 @@ direction) is fitted by Levenberg-Marquardt with bounds on the tip residuals, mo
 measured in the measurement frame, with the Jacobian exact: forward-mode autodiff through the
 implicitly differentiated displacement-driven solve of every sample. The first step solves along
 the recorded sequence (``rig.along``); every later one starts each sample from its solution at the
-step before, side by side (Newton without a load ramp), and a trial where some sample fails
-counts as a failed step (Levenberg-Marquardt then takes a shorter one).
+step before, side by side (Newton without a load ramp); a sample lost that way is reached along
+the recording at the trial's values instead, and a trial where some sample still fails counts as
+a failed step (Levenberg-Marquardt then takes a shorter one).
 """
 
 from __future__ import annotations
@@ -361,6 +362,12 @@ def fit_recording(
     def evaluate(x):
         r, J, unknowns, codes = _fit_step(jnp.asarray(x), rig, servos, guesses[0], measured, params, solver)
         codes = np.asarray(codes)
+        if np.any(codes != status.SUCCESS):  # lost from their last solutions: reached along the recording instead
+            trial = rigs.replace(rig, {p: float(v) for p, v in _values(jnp.asarray(x), params).items()})
+            fresh = _from_neighbours(trial, servos, solver)[1]
+            retry = jnp.asarray(np.where((codes != status.SUCCESS)[:, None], fresh, np.asarray(guesses[0])))
+            r, J, unknowns, codes = _fit_step(jnp.asarray(x), rig, servos, retry, measured, params, solver)
+            codes = np.asarray(codes)
         if np.all(codes == status.SUCCESS):
             guesses[0] = unknowns
         r = np.asarray(r)
