@@ -362,8 +362,8 @@ def fit_recording(
     def evaluate(x):
         r, J, unknowns, codes = _fit_step(jnp.asarray(x), rig, servos, guesses[0], measured, params, solver)
         codes = np.asarray(codes)
-        if np.any(codes != status.SUCCESS):  # lost from their last solutions: reached along the recording instead
-            trial = rigs.replace(rig, {p: float(v) for p, v in _values(jnp.asarray(x), params).items()})
+        if np.any(codes != status.SUCCESS) and (trial := _trial(rig, x, params)) is not None:
+            # lost from their last solutions: reached along the recording instead
             fresh = _from_neighbours(trial, servos, solver)[1]
             retry = jnp.asarray(np.where((codes != status.SUCCESS)[:, None], fresh, np.asarray(guesses[0])))
             r, J, unknowns, codes = _fit_step(jnp.asarray(x), rig, servos, retry, measured, params, solver)
@@ -414,6 +414,15 @@ def calibrate_rig(rig: rigs.Rig, recording: Recording, params: Sequence[str] = R
     """Former name of ``tdct.calibrate(rig, recording, params)``."""
     deprecated("tdct.calibrate_rig", "tdct.calibrate(rig, recording, params)")
     return fit_recording(rig, recording, params, **options)
+
+
+def _trial(rig: rigs.Rig, x, params):
+    """The rig at a trial step's fitted coordinates x, or None where a value there is out of range
+    (a step so long that a value fitted in log space underflows: the step fails as it is)."""
+    try:
+        return rigs.replace(rig, {p: float(v) for p, v in _values(jnp.asarray(x), params).items()})
+    except ValueError:
+        return None
 
 
 def _from_neighbours(rig: rigs.Rig, servos, solver: SolverOptions):

@@ -5,6 +5,7 @@ library made, and ``tdct calibrate --dataset`` end to end on a slice of the real
 Every solve here is the ftdcr-v4 robot with 24 samples, so the programs compile once per session."""
 
 import dataclasses
+import importlib
 import json
 import re
 import shutil
@@ -21,6 +22,7 @@ from tdct_jax import rig as rigs
 from tdct_jax.calibrate_rig import RIG_SOLVER, identify_geometry, predict, synthesize_recording
 from tdct_jax.recording import read_dataset
 
+calibrate_rig = importlib.import_module("tdct_jax.calibrate_rig")  # tdct_jax.calibrate_rig is also a former name
 DATA = Path(__file__).resolve().parents[1] / "data" / "ftdcr-v4"
 N = 24
 """Samples per recording in this file (one compiled program per sample count)."""
@@ -257,6 +259,14 @@ def test_cli_calibrates_a_slice_end_to_end(tmp_path, capsys, monkeypatch):
 
     train_servos = read_dataset(DATA / "dataset.toml").train.displacements[:N]
     monkeypatch.setattr(rigs, "along", failing)
+    fit_step, guesses = calibrate_rig._fit_step, []
+
+    def losing(x, rig, servos, start, *rest):  # the first trial step loses sample 3 from its last solution
+        r, J, unknowns, codes = fit_step(x, rig, servos, start, *rest)
+        guesses.append(np.asarray(start))
+        return r, J, unknowns, codes.at[3].set(tdct.status.NEWTON_LIMIT) if len(guesses) == 2 else codes
+
+    monkeypatch.setattr(calibrate_rig, "_fit_step", losing)
     for name, keep in (("train.csv", N), ("val.csv", N), ("tendon_pull.csv", 200)):
         lines = (DATA / name).read_text().splitlines()[: keep + 1]
         (tmp_path / name).write_text("\n".join(lines) + "\n")
@@ -282,6 +292,8 @@ def test_cli_calibrates_a_slice_end_to_end(tmp_path, capsys, monkeypatch):
     assert code in (0, 1)  # 1: stopped at --max-steps, its best values kept (the fit's accuracy: the test above)
     fit = report["fit"]
     assert fit["left_out_lines"] == [11]  # sample 9: the file's header is line 1
+    # the lost sample was solved again along the recording, at the trial's values, and the trial re-run from there
+    assert not np.array_equal(guesses[2][3], guesses[1][3])
     assert fit["after_mm"]["rmse"] < fit["before_mm"]["rmse"] and fit["after_mm"]["n"] == N - 1
     fitted = rigs.Rig.from_toml(out / "fitted.toml")
     assert rigs.value(fitted, "pretension[0-2]") == pytest.approx(fit["values"]["pretension[0-2]"], rel=1e-12)
