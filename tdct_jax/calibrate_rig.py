@@ -6,9 +6,10 @@ direction) is fitted by Levenberg-Marquardt with bounds on the tip residuals, mo
 measured in the measurement frame, with the Jacobian exact: forward-mode autodiff through the
 implicitly differentiated displacement-driven solve of every sample. The first step solves along
 the recorded sequence (``rig.along``); every later one starts each sample from its solution at the
-step before, side by side (Newton without a load ramp); a sample lost that way is reached along
-the recording at the trial's values instead, and a trial where some sample still fails counts as
-a failed step (Levenberg-Marquardt then takes a shorter one).
+step before, side by side (Newton without a load ramp); in a trial whose other samples already
+lower the cost, a sample lost that way is reached along the recording at the trial's values
+instead, and a trial where some sample still fails counts as a failed step (Levenberg-Marquardt
+then takes a shorter one).
 """
 
 from __future__ import annotations
@@ -357,20 +358,23 @@ def fit_recording(
     rig = rigs.replace(rig, {k: v for k, v in shifted.items() if k in params})
     initial = {p: rigs.value(rig, p) for p in params}
     lo, hi = _bounds(params, initial, bounds or {})
-    history, first = [], []
+    history, first, cost = [], [], [np.inf]
 
     def evaluate(x):
         r, J, unknowns, codes = _fit_step(jnp.asarray(x), rig, servos, guesses[0], measured, params, solver)
         codes = np.asarray(codes)
-        if np.any(codes != status.SUCCESS) and (trial := _trial(rig, x, params)) is not None:
+        solved = np.repeat(codes == status.SUCCESS, 3)
+        promising = np.sum(np.where(solved, np.asarray(r), 0.0) ** 2) < cost[0]  # else the step fails anyway
+        if not solved.all() and promising and (trial := _trial(rig, x, params)) is not None:
             # lost from their last solutions: reached along the recording instead
             fresh = _from_neighbours(trial, servos, solver)[1]
             retry = jnp.asarray(np.where((codes != status.SUCCESS)[:, None], fresh, np.asarray(guesses[0])))
             r, J, unknowns, codes = _fit_step(jnp.asarray(x), rig, servos, retry, measured, params, solver)
             codes = np.asarray(codes)
+        r = np.asarray(r)
         if np.all(codes == status.SUCCESS):
             guesses[0] = unknowns
-        r = np.asarray(r)
+            cost[0] = min(cost[0], float(r @ r))  # the cost of the point the fit stands at
         first[:] = first or [r]
         history[:] = history or [float(np.sqrt(np.mean(r**2) * 3))]
         return r, np.asarray(J), status.first_failure(codes), r
