@@ -15,6 +15,7 @@ then takes a shorter one).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from collections.abc import Mapping, Sequence
 from functools import partial
 from pathlib import Path
@@ -49,14 +50,11 @@ def default_params(rig: rigs.Rig) -> tuple:
     The backbone's E stays: without gravity, E, the tendons' stiffness and their pretension act
     only in ratio (and on the ftdcr-v4 recording, with gravity on, E correlates +1.00 with the
     pretensions)."""
-    ends = [t.end for t in rig.robot.tendons]
-    groups, first = [], 0
-    for i in range(1, len(ends) + 1):
-        if i == len(ends) or ends[i] != ends[first]:
-            groups.append(f"{first}-{i - 1}" if i - 1 > first else f"{first}")
-            first = i
+    tendons = rig.robot.tendons
+    segments = [list(run) for _, run in itertools.groupby(range(len(tendons)), key=lambda i: tendons[i].end)]
+    groups = [f"{s[0]}-{s[-1]}" if len(s) > 1 else f"{s[0]}" for s in segments]
     params = ["scale", *(f"pretension[{g}]" for g in groups), *(f"tendons[{g}].stiffness" for g in groups)]
-    params += [f"tendons[{i}].angle" for i in range(len(ends))]
+    params += [f"tendons[{i}].angle" for i in range(len(tendons))]
     return (*params, "rotation[0]", "rotation[1]", "translation[0]", "translation[1]", "translation[2]")
 
 
@@ -256,8 +254,8 @@ def identify_geometry(rig: rigs.Rig, pulls: Recording) -> tuple[rigs.Rig, Geomet
     tendon's angle is the direction of the sum of its pulls' tip motions from its least pull (two
     pulls at least: a rest pose would carry the pretensions' own bend), taken in the robot's base
     frame through the rig's registration ``rotation`` (so a rotation about the axis is carried by
-    the angles). Gravity across the robot tilts the motions a little:
-    the calibration that follows refines the angles it fits.
+    the angles). Gravity across the robot tilts the motions a little: the calibration that follows
+    refines the angles it fits.
 
     Returns:
         The rig with those angles and its servo sign, and the Geometry found.
@@ -273,7 +271,7 @@ def identify_geometry(rig: rigs.Rig, pulls: Recording) -> tuple[rigs.Rig, Geomet
         others = np.where(np.arange(k)[None] == pulled[:, None], -np.inf, s).max(axis=1)
         amount = s[np.arange(n), pulled]
         alone = amount - others > PULL_MARGIN
-        spread = sum(np.ptp(across[alone & (pulled == i)], axis=0).sum() for i in range(k) if np.any(alone & (pulled == i)))
+        spread = sum(np.ptp(across[m], axis=0).sum() for m in (alone & (pulled == i) for i in range(k)) if m.any())
         found.append((spread, sign, pulled, alone, amount))
     _, sign, pulled, alone, amount = max(found, key=lambda f: f[0])
     before = np.array([float(t.angle) for t in rig.robot.tendons])
@@ -335,10 +333,10 @@ def fit_recording(
     for p in params:
         rigs.check_name(rig, p)
     max_steps = check_integer("max_steps", max_steps)
-    servos, measured = jnp.asarray(_servos(rig, recording)), jnp.asarray(recording.tip)
     geometry = None
     if pulls is not None:
         rig, geometry = identify_geometry(rig, pulls)
+    servos, measured = jnp.asarray(_servos(rig, recording)), jnp.asarray(recording.tip)  # checked with the rig's sign
     start = perf_counter()
     bar = tqdm(desc="calibrating", unit="step", disable=not progress, leave=False)
     bar.set_postfix_str("solving along the recording (compiling)")

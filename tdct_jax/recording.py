@@ -232,25 +232,24 @@ def read_dataset(path: str | os.PathLike) -> Dataset:
     train_path = folder / spec["train"]
     train = _table(train_path)
     train_recording = recording(train_path, train)  # a column the description names but a file lacks: that file's error
-    validation = None
-    if "validation" in spec:
-        val_path = folder / spec["validation"]
-        validation = _table(val_path)
-        validation_recording = recording(val_path, validation)
-        _check_same_columns((train_path, train), (val_path, validation))
-    pulls = None
-    if "pulls" in spec:
-        pulls_path = folder / spec["pulls"]
-        pulls_table = _table(pulls_path)
-        pulls = recording(pulls_path, pulls_table)
-        _check_same_columns((train_path, train), (pulls_path, pulls_table), "pulls")
+
+    def beside_train(key: str) -> Recording | None:
+        """The recording under ``key`` (optional), with the training file's columns."""
+        if key not in spec:
+            return None
+        other_path = folder / spec[key]
+        other = _table(other_path)
+        read = recording(other_path, other)
+        _check_same_columns((train_path, train), (other_path, other), key)
+        return read
+
     return Dataset(
         train=train_recording,
-        validation=None if validation is None else validation_recording,
+        validation=beside_train("validation"),
         robot=folder / spec["robot"] if "robot" in spec else None,
         description=path,
         roles=roles,
-        pulls=pulls,
+        pulls=beside_train("pulls"),
     )
 
 

@@ -169,8 +169,7 @@ class Rig:
 
     def displacements(self, servo):
         """Commanded tendon displacements [m] for servo readings [m], (..., n_t)."""
-        EA = jnp.stack([jnp.asarray(t.stiffness, float) for t in self.robot.tendons])
-        return self.sign * self.scale * servo + self.pretension * rod.rest_lengths(self.robot) / EA
+        return self.sign * self.scale * servo + self.pretension * rod.rest_lengths(self.robot) / rod.tendon_stiffness(self.robot)
 
     def to_measured(self, p):
         """Points p (..., 3) in the robot base frame, in the measurement frame."""

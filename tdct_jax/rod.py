@@ -245,8 +245,7 @@ def _driven_tensions(robot: Robot, act: Actuation):
     where the given tensions (a warm start's) are zero."""
     i = np.asarray(act.driven)
     offset = _tendon_fields(robot)[0][i]
-    l = rest_lengths(robot)[i]
-    EA = jnp.stack([jnp.asarray(jnp.inf if t.stiffness is None else t.stiffness, float) for t in robot.tendons])[i]
+    l, EA = rest_lengths(robot)[i], tendon_stiffness(robot)[i]
     sec = robot.sections[0]
     EI = sec.E * jnp.pi / 64 * (sec.outer_diameter**4 - sec.inner_diameter**4)
     return jnp.maximum(act.displacements, 0.0) / (l / EA + offset**2 * l / EI)
@@ -307,11 +306,15 @@ def rest_lengths(robot: Robot):
     return _anchors(robot) * jnp.sqrt(1 + (offset * twist) ** 2)
 
 
+def tendon_stiffness(robot: Robot):
+    """Each tendon's axial stiffness EA [N], inf for an inextensible one (no ``stiffness``), (n_t,)."""
+    return jnp.stack([jnp.asarray(jnp.inf if t.stiffness is None else t.stiffness, float) for t in robot.tendons])
+
+
 def displacements(robot: Robot, act: Actuation, lengths):
     """What each tendon's encoder reads [m]: its rest length inside the robot less its present
     rest length there, l / (1 + tau / EA) (l: its length along the shape), (n_t,)."""
-    EA = [jnp.inf if t.stiffness is None else t.stiffness for t in robot.tendons]
-    stretch = 1 + jnp.asarray(act.tensions, float) / jnp.stack([jnp.asarray(x, float) for x in EA]) if robot.tendons else 1.0
+    stretch = 1 + jnp.asarray(act.tensions, float) / tendon_stiffness(robot) if robot.tendons else 1.0
     return rest_lengths(robot) - lengths / stretch
 
 
