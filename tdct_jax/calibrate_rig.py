@@ -9,7 +9,9 @@ the recorded sequence (``rig.along``); every later one starts each sample from i
 step before, side by side (Newton without a load ramp); in a trial whose other samples already
 lower the cost, a sample lost that way is reached along the recording at the trial's values
 instead, and a trial where some sample still fails counts as a failed step (Levenberg-Marquardt
-then takes a shorter one).
+then takes a shorter one). With tendon friction every step solves along the sequence, each sample
+taking the last one's tension profile as its memory, and the Jacobian carries each parameter's
+tangent through the memory too.
 """
 
 from __future__ import annotations
@@ -46,7 +48,8 @@ robot axis is left to the tendon angles, with which it is degenerate). The defau
 def default_params(rig: rigs.Rig) -> tuple:
     """The default fit of a rig, for any robot: the servo scale; per segment (consecutive tendons
     anchored at the same arc length) one pretension and one tendon stiffness; every tendon's
-    angle; the registration but its rotation about the robot's axis (the angles' common part).
+    angle; each section's friction coefficient where it has one; the registration but its
+    rotation about the robot's axis (the angles' common part).
     The backbone's E stays: without gravity, E, the tendons' stiffness and their pretension act
     only in ratio (and on the ftdcr-v4 recording, with gravity on, E correlates +1.00 with the
     pretensions)."""
@@ -55,6 +58,7 @@ def default_params(rig: rigs.Rig) -> tuple:
     groups = [f"{s[0]}-{s[-1]}" if len(s) > 1 else f"{s[0]}" for s in segments]
     params = ["scale", *(f"pretension[{g}]" for g in groups), *(f"tendons[{g}].stiffness" for g in groups)]
     params += [f"tendons[{i}].angle" for i in range(len(tendons))]
+    params += [f"sections[{j}].friction" for j, sec in enumerate(rig.robot.sections) if sec.friction is not None]
     return (*params, "rotation[0]", "rotation[1]", "translation[0]", "translation[1]", "translation[2]")
 
 
@@ -75,7 +79,23 @@ def _fit_step(x, rig, servos, guesses, measured, params, solver):
         # warm starts need no load ramp from zero, and under vmap one failing sample would make
         # every sample run all of its stages
         warm = dataclasses.replace(solver, stages=(1,))
-        tip, unknowns, code = rigs._batch(rigs.replace(rig, _values(x, params)), servos, guesses, warm)
+        tip, unknowns, code, _ = rigs._batch(rigs.replace(rig, _values(x, params)), servos, guesses, warm)
+        r = (tip - measured).ravel()
+        return r, (r, unknowns, code)
+
+    J, (r, unknowns, codes) = jax.jacfwd(residual, has_aux=True)(x)
+    return r, J, unknowns, codes
+
+
+@partial(jax.jit, static_argnames=("params", "solver"))
+def _fit_along(x, rig, servos, measured, params, solver):
+    """``_fit_step`` with tendon friction: the samples solved in order (``rig.along``), each with
+    the last one's tension profile as memory, so that the Jacobian is exact through the memory
+    too (forward mode carries each parameter's tangent along the sequence); about twice the cost
+    of the sequence itself."""
+
+    def residual(x):
+        tip, unknowns, code, _ = rigs._along(rigs.replace(rig, _values(x, params)), servos, solver)
         r = (tip - measured).ravel()
         return r, (r, unknowns, code)
 
@@ -314,7 +334,8 @@ def fit_recording(
         pulls: (optional) a recording of single-tendon pulls: the geometry step
             (``identify_geometry``: each tendon's angle and the servo sign) comes first, so the
             fit may start from a nominal description whose angles are far off.
-        bounds: {name: (lo, hi)} in SI units; pretensions are kept >= 0 unless given.
+        bounds: {name: (lo, hi)} in SI units; pretensions and friction coefficients are kept >= 0
+            unless given.
         max_steps: most Levenberg-Marquardt trial steps. xtol: converged when the bounded
             Gauss-Newton step moves no coordinate by more than this (relative for values fitted
             in log space); ftol: or when a step lowers the squared error by at most this
@@ -340,7 +361,7 @@ def fit_recording(
     start = perf_counter()
     bar = tqdm(desc="calibrating", unit="step", disable=not progress, leave=False)
     bar.set_postfix_str("solving along the recording (compiling)")
-    tip, unknowns, codes = _from_neighbours(rig, servos, solver)
+    tip, unknowns, codes, _ = _from_neighbours(rig, servos, solver)
     keep = np.flatnonzero(codes == status.SUCCESS)
     left_out = tuple(int(line) for line in np.asarray(recording.lines)[codes != status.SUCCESS])
     if keep.size == 0:
@@ -358,7 +379,8 @@ def fit_recording(
     lo, hi = _bounds(params, initial, bounds or {})
     history, first, cost = [], [], [np.inf]
 
-    def evaluate(x):
+    def side_by_side(x):
+        """Every sample from its last solution; a lost one reached along the recording."""
         r, J, unknowns, codes = _fit_step(jnp.asarray(x), rig, servos, guesses[0], measured, params, solver)
         codes = np.asarray(codes)
         solved = np.repeat(codes == status.SUCCESS, 3)
@@ -368,14 +390,20 @@ def fit_recording(
             fresh = _from_neighbours(trial, servos, solver)[1]
             retry = jnp.asarray(np.where((codes != status.SUCCESS)[:, None], fresh, np.asarray(guesses[0])))
             r, J, unknowns, codes = _fit_step(jnp.asarray(x), rig, servos, retry, measured, params, solver)
-            codes = np.asarray(codes)
-        r = np.asarray(r)
+        return r, J, unknowns, codes
+
+    def evaluate(x):
+        if rig.robot.has_friction:  # the memory runs along the recording: in order
+            out = _fit_along(jnp.asarray(x), rig, servos, measured, params, solver)
+        else:
+            out = side_by_side(x)
+        r, J, unknowns, codes = (np.asarray(a) for a in out)
         if np.all(codes == status.SUCCESS):
             guesses[0] = unknowns
             cost[0] = min(cost[0], float(r @ r))  # the cost of the point the fit stands at
         first[:] = first or [r]
         history[:] = history or [float(np.sqrt(np.mean(r**2) * 3))]
-        return r, np.asarray(J), status.first_failure(codes), r
+        return r, J, status.first_failure(codes), r
 
     def report(it, r, step):
         history.append(float(np.sqrt(np.mean(r**2) * 3)))
@@ -428,16 +456,23 @@ def _trial(rig: rigs.Rig, x, params):
 
 
 def _from_neighbours(rig: rigs.Rig, servos, solver: SolverOptions):
-    """``rig.along`` the sequence, then the samples it could not reach along it again from the end
-    backward (from their neighbour after): tips, unknowns and codes (numpy)."""
-    tip, unknowns, codes = (np.asarray(a) for a in rigs.along(rig, servos, solver))
-    if np.any(codes != status.SUCCESS):
-        back = [np.asarray(a)[::-1] for a in rigs.along(rig, servos[::-1], solver)]
-        fixed = (codes != status.SUCCESS) & (back[2] == status.SUCCESS)
-        tip, unknowns, codes = (
-            np.where(fixed.reshape(-1, *[1] * (a.ndim - 1)), b, a) for a, b in zip((tip, unknowns, codes), back, strict=True)
-        )
-    return tip, unknowns, codes
+    """``rig.along`` the sequence, then the samples it could not reach along it again: solved from
+    the solutions of a pass from the end backward (their neighbour after), each with its memory
+    from the forward pass (friction's memory runs forward only): tips, unknowns, codes and tension
+    profiles (numpy; profiles None without friction)."""
+    out = [None if a is None else np.asarray(a) for a in rigs.along(rig, servos, solver)]
+    failed = np.flatnonzero(out[2] != status.SUCCESS)
+    if failed.size:
+        _, back, codes, _ = (None if a is None else np.asarray(a)[::-1] for a in rigs.along(rig, servos[::-1], solver))
+        failed, back = failed[codes[failed] == status.SUCCESS], back[failed[codes[failed] == status.SUCCESS]]
+    if failed.size:
+        memory = rigs.memories(out[3])
+        again = rigs._batch(rig, servos[failed], jnp.asarray(back), solver, None if memory is None else memory[failed])
+        fixed = np.asarray(again[2]) == status.SUCCESS
+        for a, b in zip(out, again, strict=True):
+            if a is not None:
+                a[failed[fixed]] = np.asarray(b)[fixed]
+    return tuple(out)
 
 
 def _bounds(params, initial, bounds):
@@ -448,7 +483,8 @@ def _bounds(params, initial, bounds):
         raise ValueError(f"bounds name {sorted(unknown)}, which are not in params {list(params)}")
     lo, hi = np.full(len(params), -np.inf), np.full(len(params), np.inf)
     for i, p in enumerate(params):
-        a, b = bounds.get(p, (0.0, np.inf) if p.startswith("pretension") else (-np.inf, np.inf))
+        nonnegative = p.startswith("pretension") or p.endswith(".friction")
+        a, b = bounds.get(p, (0.0, np.inf) if nonnegative else (-np.inf, np.inf))
         if not a <= initial[p] <= b:
             raise ValueError(f"bounds[{p!r}] = ({a:g}, {b:g}) must hold the starting value {initial[p]:g}")
         if rigs.is_linear(p):
@@ -502,7 +538,7 @@ def predict(rig: rigs.Rig, recording: Recording, *, solver: SolverOptions = RIG_
     servos = jnp.asarray(_servos(rig, recording))
     jax.block_until_ready(rigs.along(rig, servos, solver))
     t = perf_counter()
-    tips, _, codes = jax.block_until_ready(rigs.along(rig, servos, solver))
+    tips, _, codes, _ = jax.block_until_ready(rigs.along(rig, servos, solver))
     seconds = (perf_counter() - t) / len(servos)
     tips, codes, measured = np.asarray(tips), np.asarray(codes), np.asarray(recording.tip)
     ok = codes == status.SUCCESS
@@ -559,7 +595,7 @@ def synthesize_recording(
         raise ValueError(f"servos has shape {servos.shape}: (samples, {rig.robot.n_tendons}) expected, one per tendon")
     if not (np.isfinite(noise) and noise >= 0):
         raise ValueError(f"noise = {noise!r} must be a finite standard deviation >= 0 [m]")
-    tip, _, codes = rigs.along(rig, jnp.asarray(servos), solver)
+    tip, _, codes, _ = rigs.along(rig, jnp.asarray(servos), solver)
     status.check(status.first_failure(codes), throw=True, what="synthesize_recording", max_iter=solver.max_iter)
     tip = np.asarray(tip) + noise * np.random.default_rng(seed).standard_normal((len(servos), 3))
     n, k = servos.shape

@@ -60,6 +60,11 @@ class Section:
         inner_diameter: central channel the tubes slide in [m] (0: none).
         tendon_channel_diameter: diameter of the channel cut for each tendon that passes through
             the section [m] (0: tendons run outside the body, e.g. through spacer disks).
+        friction: Coulomb coefficient mu between the tendons and their guides in this section
+            (capstan friction with memory, rod.py "Tendon friction"); None (default): frictionless,
+            and the solver skips the friction terms unless some section has a coefficient.
+        guide_spacing: arc length between the guides [m]: spacer disks; 0 (default): a continuous
+            channel, a guide at every RK4 node.
     """
 
     end: float
@@ -69,10 +74,15 @@ class Section:
     density: float
     inner_diameter: float = 0.0
     tendon_channel_diameter: float = 0.0
+    friction: float | None = None
+    guide_spacing: float = 0.0
 
     def __post_init__(self):
         units = dict(end=" m", outer_diameter=" m", E=" Pa", nu="", density=" kg/m^3", inner_diameter=" m")
-        _scalars(self, units | dict(tendon_channel_diameter=" m"))
+        _scalars(self, units | dict(tendon_channel_diameter=" m", friction="", guide_spacing=" m"), optional=("friction",))
+        if self.friction is not None:
+            check_range("Section.friction", self.friction, 0.0)
+        check_range("Section.guide_spacing", self.guide_spacing, 0.0, unit=" m")
         check_range("Section.end", self.end, 0.0, lo_open=True, unit=" m")
         check_range("Section.outer_diameter", self.outer_diameter, 0.0, lo_open=True, unit=" m")
         check_range("Section.E", self.E, 0.0, lo_open=True, unit=" Pa")
@@ -353,7 +363,7 @@ class Robot(metaclass=_PaperByDefault):
         length = data["length"]
         sections, previous = [], 0.0
         for i, raw in enumerate(_tables("sections", data)):
-            _keys(f"sections[{i}]", raw, required=SECTION_KEYS, optional=("start", "inner_diameter", "tendon_channel_diameter"))
+            _keys(f"sections[{i}]", raw, required=SECTION_KEYS, optional=SECTION_OPTIONAL)
             if "start" in raw and not math.isclose(float(raw["start"]), previous, rel_tol=1e-12, abs_tol=1e-15):
                 what = "a gap" if float(raw["start"]) > previous else "an overlap"
                 raise ValueError(
@@ -415,6 +425,11 @@ class Robot(metaclass=_PaperByDefault):
     @property
     def n_tendons(self) -> int:
         return len(self.tendons)
+
+    @property
+    def has_friction(self) -> bool:
+        """Some section has a friction coefficient (static): the solver carries tendon tension profiles."""
+        return any(sec.friction is not None for sec in self.sections)
 
     @property
     def n_tubes(self) -> int:
@@ -510,6 +525,7 @@ class Robot(metaclass=_PaperByDefault):
 
 
 SECTION_KEYS = ("end", "outer_diameter", "E", "nu", "density")
+SECTION_OPTIONAL = ("start", "inner_diameter", "tendon_channel_diameter", "friction", "guide_spacing")
 TENDON_OPTIONAL = ("end", "twist_deg_per_m", "max_tension", "stiffness")
 
 

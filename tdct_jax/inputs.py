@@ -47,12 +47,17 @@ class Actuation(metaclass=_Insertion):
             would take a negative tension the tendon goes slack (tension exactly 0,
             ``Solution.slack``).
         driven: indices of the displacement-driven tendons, 0 for tendon 1 (static).
+        memory: with tendon friction (``Section.friction``), each tendon's tension profile at the
+            previous pose [N], (n_nodes, n_t): the previous Solution's ``tendon_tension``, so that
+            tendons stick where the new pose does not make them slide (quasi-static hysteresis);
+            None (default): loading from slack (zero tension everywhere before this pose).
     """
 
     tensions: object = ()
     insertions: object = ()
     displacements: object = ()
     driven: tuple = static(default=())
+    memory: object = None
 
     def __post_init__(self):
         tensions = self.tensions
@@ -80,7 +85,19 @@ class Actuation(metaclass=_Insertion):
         )
         if not k and np.ndim(tensions) > 1:  # none, with the tensions' batch axes: vmap maps every leaf
             displacements = np.zeros(np.shape(tensions)[:-1] + (0,))
-        set_fields(self, tensions=tensions, insertions=insertions, displacements=displacements, driven=driven)
+        memory = None if self.memory is None else as_array("memory", self.memory, unit=" N")
+        if memory is not None:
+            if is_concrete(memory) and (np.ndim(memory) < 2 or np.shape(memory)[-1] != np.shape(tensions)[-1]):
+                raise ValueError(
+                    f"memory has shape {np.shape(memory)}: a tension profile (n_nodes, n_tendons) is expected, "
+                    f"n_tendons = {np.shape(tensions)[-1]} (a Solution's tendon_tension)"
+                )
+            if is_concrete(memory) and np.min(memory) < 0:
+                row, col = np.unravel_index(np.argmin(memory), np.shape(memory))
+                raise ValueError(
+                    f"memory[{row}, {col}] = {np.min(memory):g} N is outside the allowed range [0, inf] N: tensions are not negative"
+                )
+        set_fields(self, tensions=tensions, insertions=insertions, displacements=displacements, driven=driven, memory=memory)
 
     @property
     def insertion(self):
@@ -101,16 +118,17 @@ class Actuation(metaclass=_Insertion):
             insertions = np.zeros(np.shape(insertions)[:-1] + (robot.n_tubes,))
         if tensions is act.tensions and insertions is act.insertions:
             return act
-        return cls._rebuild(tensions, insertions, act.displacements, act.driven)
+        return cls._rebuild(tensions, insertions, act.displacements, act.driven, act.memory)
 
     @classmethod
-    def _rebuild(cls, tensions, insertions, displacements, driven) -> Actuation:
+    def _rebuild(cls, tensions, insertions, displacements, driven, memory=None) -> Actuation:
         """Built without the checks (inside the solver, from traced values; stacks)."""
-        return unchecked(cls, tensions=tensions, insertions=insertions, displacements=displacements, driven=driven)
+        return unchecked(cls, tensions=tensions, insertions=insertions, displacements=displacements, driven=driven, memory=memory)
 
     def scaled(self, lam) -> Actuation:
-        """Tensions and displacements times lam (the solver's load continuation)."""
-        return self._rebuild(lam * self.tensions, self.insertions, lam * self.displacements, self.driven)
+        """Tensions, displacements and memory times lam (the solver's load continuation)."""
+        memory = None if self.memory is None else lam * self.memory
+        return self._rebuild(lam * self.tensions, self.insertions, lam * self.displacements, self.driven, memory)
 
 
 @pytree

@@ -23,7 +23,7 @@ def coupled(y, *others):
     return jax.tree.map(lambda a: a + zero, y)
 
 
-def rk4(f, y0, h, steps: int, project=None, path: bool = False):
+def rk4(f, y0, h, steps: int, project=None, path: bool = False, xs=None):
     """Integrates y' = f(y) in ``steps`` classical RK4 steps of length h: a ``lax.scan`` of the
     steps, each a loop of its four stages (rod.py scans the pieces between breakpoints, each
     with its own parameters, and calls this for each).
@@ -39,8 +39,10 @@ def rk4(f, y0, h, steps: int, project=None, path: bool = False):
             batched or differentiated (rod.py couples the state once, before its scan of the pieces).
         h: the step length (traced; a zero step gives the state back).
         steps: RK4 steps (static).
-        project: optional map applied to the state after each step (e.g. back onto SO(3)).
+        project: optional map applied to the state after each step (e.g. back onto SO(3)); with
+            ``xs``, called as project(y, x) with the step's slice x of xs.
         path: also return the states at all steps + 1 nodes (leading axis).
+        xs: optional per-step data for ``project`` (a pytree with leading axis ``steps``).
 
     Returns:
         The final state, and the stacked path when ``path`` is True.
@@ -48,7 +50,7 @@ def rk4(f, y0, h, steps: int, project=None, path: bool = False):
     after = jnp.array([0.5, 0.5, 1.0, 0.0])  # where stage j + 1 evaluates, in steps from y
     weights = jnp.array([1.0, 2.0, 2.0, 1.0]) / 6
 
-    def step(y, _):
+    def step(y, x):
         # the loop carries the sum so far and the next stage's point, both starting at y: no
         # zeros to start from, which ``vmap`` and ``jax.jvp`` would trace the stages again to
         # find batched and differentiated (``coupled``)
@@ -59,10 +61,10 @@ def rk4(f, y0, h, steps: int, project=None, path: bool = False):
 
         y, _ = lax.fori_loop(0, 4, stage, (y, y))
         if project is not None:
-            y = project(y)
+            y = project(y) if xs is None else project(y, x)
         return y, (y if path else None)
 
-    y1, ys = lax.scan(step, y0, None, length=steps)
+    y1, ys = lax.scan(step, y0, xs, length=steps)
     if not path:
         return y1
     return y1, jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), y0, ys)

@@ -856,6 +856,55 @@ def plot_pairs(predicted, measured, pairs, path: str | Path | None = None, title
 
 
 @_styled
+def plot_hysteresis(loops, path: str | Path | None = None, title: str | None = None):
+    """Pull-release loops, one panel each: the tip's travel along its main direction of motion
+    against the pulled tendon's servo reading (mm), measured and as each model predicts it, each
+    relative to its own first sample. ``loops``: dicts with ``label``, ``servo`` (n,) [m],
+    ``measured`` (n, 3) [m] and ``predicted`` {model: tips (n, 3) [m]}. A model without memory
+    retraces its path on the release; friction with memory opens a loop."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, len(loops), figsize=(4.2 * len(loops), 4), squeeze=False)
+    for ax, loop in zip(axes[0], loops, strict=True):
+        servo, measured = 1e3 * np.asarray(loop["servo"]), 1e3 * np.asarray(loop["measured"])
+        d = measured - measured[0]
+        axis = np.linalg.svd(d - d.mean(0), full_matrices=False)[2][0]
+        axis = axis if d[np.argmax(np.abs(d @ axis))] @ axis > 0 else -axis
+        ax.plot(servo, d @ axis, "k.-", ms=4, lw=0.8, label="measured")
+        for k, (label, tips) in enumerate(loop["predicted"].items()):
+            t = 1e3 * np.asarray(tips)
+            ax.plot(servo, (t - t[0]) @ axis, "-", color=f"C{k}", lw=1.5, label=label)
+        ax.set_xlabel("pulled tendon's servo reading [mm]")
+        ax.set_title(loop["label"], fontsize=10)
+    axes[0, 0].set_ylabel("tip travel along its main direction [mm]")
+    axes[0, 0].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    return _finish(fig, path)
+
+
+@_styled
+def plot_residuals(measured, predicted: dict, path: str | Path | None = None, title: str | None = None):
+    """Tip errors along a recording (mean offset removed, mm), one line per model (``predicted``:
+    {label: tips (n, 3) [m]}, NaN rows where a sample did not solve), each with its RMSE."""
+    plt = _pyplot()
+    measured = 1e3 * np.asarray(measured)
+    fig, ax = plt.subplots(figsize=(10, 3.8))
+    for k, (label, tips) in enumerate(predicted.items()):
+        t = 1e3 * np.asarray(tips)
+        ok = np.all(np.isfinite(t), axis=1)
+        e = np.full(len(t), np.nan)
+        e[ok] = np.linalg.norm(t[ok] + np.mean(measured[ok] - t[ok], axis=0) - measured[ok], axis=1)
+        ax.plot(e, "-", color=f"C{k}", lw=1, label=f"{label}: RMSE {np.sqrt(np.nanmean(e**2)):.2f} mm")
+    ax.set_xlabel("sample, in recorded order")
+    ax.set_ylabel("tip error [mm]")
+    ax.set_ylim(bottom=0)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return _finish(fig, path)
+
+
+@_styled
 def plot_contact_press(res: dict, path: str | Path | None = None, title: str | None = None):
     """The tip pressed on a table against insertion (``paper.contact_press``): the normal force on
     the table, and the tip compliance in contact beside the free robot's, along x (across the

@@ -261,58 +261,85 @@ def _unknowns(robot: Robot):
     return 6 + robot.n_tendons
 
 
-def solve_sample(rig: Rig, servo, guess, solver: SolverOptions = DEFAULT_SOLVER):
+def solve_sample(rig: Rig, servo, guess, solver: SolverOptions = DEFAULT_SOLVER, memory=None):
     """The model's tip in the measurement frame for servo readings [m] (n_t,), from ``guess`` (base
     wrench and tensions, (6 + n_t,), NaN: the straight robot): (tip (3,), the unknowns found
-    (6 + n_t,), status code). Derivatives in the rig come from the implicit function theorem."""
+    (6 + n_t,), status code, and with tendon friction the tension profile, else None).
+    ``memory``: with friction, the previous sample's tension profile (``Actuation.memory``).
+    Derivatives in the rig come from the implicit function theorem."""
     robot = rig.robot
     n = robot.n_tendons
     guess = lax.stop_gradient(guess)
     warm = jnp.all(jnp.isfinite(guess))
-    act = Actuation._rebuild(jnp.where(warm, guess[6:], 0.0), jnp.zeros(robot.n_tubes), rig.displacements(servo), tuple(range(n)))
+    act = Actuation._rebuild(
+        jnp.where(warm, guess[6:], 0.0), jnp.zeros(robot.n_tubes), rig.displacements(servo), tuple(range(n)), memory
+    )
     problem = (robot, act, Loads(), rig.gravity)
     x, info = roots.root(*problem, jnp.where(warm, guess, jnp.nan), solver)
     F_c = force_scale(*problem)
-    tip = shoot(*problem, solver, x, F_c)[1]
-    return rig.to_measured(tip.p), unscaled(robot, x, F_c), info.result.astype(jnp.int32)
+    profile = None
+    if robot.has_friction:
+        _, (nodes, pl, *_) = shoot(*problem, solver, x, F_c, path=True)
+        tip, profile = nodes.y.p[-1, -1], rod.tension_profile(pl, nodes)
+    else:
+        tip = shoot(*problem, solver, x, F_c)[1].p
+    return rig.to_measured(tip), unscaled(robot, x, F_c), info.result.astype(jnp.int32), profile
 
 
 def _along(rig: Rig, servos, solver: SolverOptions):
     """``solve_sample`` along a recorded sequence, each sample warm-started from the last
-    converged one, and when that fails, reached by a ramp of ``RAMP`` sub-steps from it. One
+    converged one, and when that fails, reached by a ramp of ``RAMP`` sub-steps from it; with
+    tendon friction, each takes the last converged one's tension profile as its memory (the ramp's
+    sub-steps too: the path the servos took), from none at the start (loading from slack). One
     chain, not vmapped pieces: under vmap every ``lax.cond`` of the solver runs both branches,
     which costs more than the lanes gain on a CPU."""
     n = _unknowns(rig.robot)
 
     def step(carry, servo):
-        last, last_servo = carry
-        tip, x, code = solve_sample(rig, servo, last, solver)
+        last, last_servo, memory = carry
+        tip, x, code, profile = solve_sample(rig, servo, last, solver, memory)
 
         def ramp():
             def sub(j, c):
                 s = last_servo + (servo - last_servo) * (j + 1) / RAMP
-                _, x, code = solve_sample(rig, s, c[0], solver)
-                return jnp.where(code == status.SUCCESS, x, c[0]), code
+                _, x, code, profile = solve_sample(rig, s, c[0], solver, c[1])
+                ok = code == status.SUCCESS
+                return jnp.where(ok, x, c[0]), c[1] if profile is None else jnp.where(ok, profile, c[1]), code
 
-            x, code = lax.fori_loop(0, RAMP, sub, (last, jnp.int32(status.SUCCESS)))
-            return solve_sample(rig, servo, x, solver)
+            x, memory_r, code = lax.fori_loop(0, RAMP, sub, (last, memory, jnp.int32(status.SUCCESS)))
+            return solve_sample(rig, servo, x, solver, memory_r)
 
-        tip, x, code = lax.cond(code == status.SUCCESS, lambda: (tip, x, code), ramp)
+        tip, x, code, profile = lax.cond(code == status.SUCCESS, lambda: (tip, x, code, profile), ramp)
         ok = code == status.SUCCESS
-        return (jnp.where(ok, x, last), jnp.where(ok, servo, last_servo)), (tip, x, code)
+        memory = memory if profile is None else jnp.where(ok, profile, memory)
+        return (jnp.where(ok, x, last), jnp.where(ok, servo, last_servo), memory), (tip, x, code, profile)
 
-    start = (jnp.full(n, jnp.nan), jnp.zeros(rig.robot.n_tendons))
+    memory = None
+    if rig.robot.has_friction:
+        memory = jnp.zeros((rod.n_intervals(rig.robot, Loads()) * (solver.steps + 1), rig.robot.n_tendons))
+    start = (jnp.full(n, jnp.nan), jnp.zeros(rig.robot.n_tendons), memory)
     return lax.scan(step, start, servos)[1]
 
 
 along = jax.jit(_along, static_argnames=("solver",))
-"""Tips (n, 3), unknowns (n, 6 + n_t) and status codes (n,) along a sequence of servo readings
-(n, n_t) [m], warm-started sample by sample (``_along``)."""
+"""Tips (n, 3), unknowns (n, 6 + n_t), status codes (n,) and, with tendon friction, tension
+profiles (n, n_nodes, n_t) (else None) along a sequence of servo readings (n, n_t) [m],
+warm-started sample by sample (``_along``)."""
+
+
+def memories(profiles):
+    """Each sample's memory from the profiles along a sequence (n, n_nodes, n_t): its predecessor's,
+    none (zeros) for the first; None without friction (``profiles`` None)."""
+    if profiles is None:
+        return None
+    profiles = jnp.asarray(profiles)
+    return jnp.concatenate([jnp.zeros_like(profiles[:1]), profiles[:-1]])
 
 
 @jax.jit
-def _batch(rig: Rig, servos, guesses, solver: SolverOptions = DEFAULT_SOLVER):
-    return jax.vmap(lambda s, g: solve_sample(rig, s, g, solver))(servos, guesses)
+def _batch(rig: Rig, servos, guesses, solver: SolverOptions = DEFAULT_SOLVER, memory=None):
+    """``solve_sample`` side by side (vmap); with friction each sample's ``memory`` given (``memories``)."""
+    return jax.vmap(lambda s, g, m: solve_sample(rig, s, g, solver, m))(servos, guesses, memory)
 
 
 def errors(predicted, measured, offset=None) -> dict:

@@ -54,6 +54,7 @@ from .segments import (
     strains,
     strains_at,
     tendon_pb,
+    tendon_tangents,
     uncarried,
 )
 
@@ -63,7 +64,8 @@ class Interval(NamedTuple):
 
     K_se (3,) [N], K_bt (3,) [N m^2], rho [kg/m], backbone (1.0: a tube inside), tau (n_t,) [N]
     (zero beyond each anchor), present (n_t,) (1.0 before each anchor), radius: the body's outer
-    radius [m] (contact gaps)."""
+    radius [m] (contact gaps), mu: the section's tendon friction coefficient (0 without one),
+    spacing: its guide spacing [m] (0: a continuous channel)."""
 
     K_se: jax.Array
     K_bt: jax.Array
@@ -72,6 +74,8 @@ class Interval(NamedTuple):
     tau: jax.Array
     present: jax.Array
     radius: jax.Array
+    mu: jax.Array
+    spacing: jax.Array
 
 
 class Plan(NamedTuple):
@@ -143,9 +147,11 @@ def interval_parameters(robot: Robot, act: Actuation, k, rank: Ranks, s):
         A = section_area(sec, jnp.sum(through))
         I_x, I_y = channelled_second_moments(sec.outer_diameter, sec.inner_diameter, sec.tendon_channel_diameter, r, through)
         G = sec.E / (2 * (1 + sec.nu))
+        mu = 0.0 if sec.friction is None else sec.friction
         props.append(
             jnp.stack(
                 [G * A, G * A, sec.E * A, sec.E * I_x, sec.E * I_y, G * (I_x + I_y), sec.density * A, sec.outer_diameter / 2]
+                + [jnp.asarray(mu, float), jnp.asarray(sec.guide_spacing, float)]
             )
         )
     p = jnp.stack(props)[idx]
@@ -158,7 +164,7 @@ def interval_parameters(robot: Robot, act: Actuation, k, rank: Ranks, s):
         EI = rho_t = backbone = jnp.zeros(())
     tau = jnp.where(present, jnp.asarray(act.tensions, float), 0.0)
     K_bt = jnp.stack([p[3] + EI, p[4] + EI, p[5]])
-    return Interval(p[:3], K_bt, p[6] + rho_t, backbone, tau, present.astype(float), p[7])
+    return Interval(p[:3], K_bt, p[6] + rho_t, backbone, tau, present.astype(float), p[7], p[8], p[9])
 
 
 class Ranks(NamedTuple):
@@ -290,14 +296,28 @@ def _segment(robot: Robot, P: Interval, s, tilt: bool = True) -> Segment:
     return Segment(P.K_se, P.K_bt, P.rho, P.tau, r, P.backbone, tilt, dr)
 
 
+class Friction(NamedTuple):
+    """The tendons' friction state at a node (module docstring, "Tendon friction"): each tendon's
+    tension in the span that starts there tau (n_t,) [N], its base tension tau_b (n_t,) [N], its
+    path's world tangent there T (n_t, 3), and the friction exponent phi (n_t,): mu times the
+    turning of its path, summed from the base."""
+
+    tau: jax.Array
+    base: jax.Array
+    T: jax.Array
+    phi: jax.Array
+
+
 class Carry(NamedTuple):
     """What RK4 integrates: the State (inside RK4 as ``segments.carried`` gives it), and where
-    needed the arc length s (helical tendons) and each tendon's length from the base, l (n_t,)
-    (displacements); None where not needed."""
+    needed the arc length s (helical tendons), each tendon's rest length from the base, l (n_t,)
+    (displacements), and the tendons' Friction state (a robot with friction); None where not
+    needed."""
 
     y: State
     s: jax.Array | None = None
     l: jax.Array | None = None
+    f: Friction | None = None
 
 
 def rest_lengths(robot: Robot):
@@ -311,11 +331,11 @@ def tendon_stiffness(robot: Robot):
     return jnp.stack([jnp.asarray(jnp.inf if t.stiffness is None else t.stiffness, float) for t in robot.tendons])
 
 
-def displacements(robot: Robot, act: Actuation, lengths):
-    """What each tendon's encoder reads [m]: its rest length inside the robot less its present
-    rest length there, l / (1 + tau / EA) (l: its length along the shape), (n_t,)."""
-    stretch = 1 + jnp.asarray(act.tensions, float) / tendon_stiffness(robot) if robot.tendons else 1.0
-    return rest_lengths(robot) - lengths / stretch
+def displacements(robot: Robot, lengths):
+    """What each tendon's encoder reads [m]: its rest length inside the straight robot less its
+    present rest length there, ``lengths``, the integral of dl / (1 + tau(s) / EA) along its path
+    (``integrate``), (n_t,)."""
+    return rest_lengths(robot) - lengths
 
 
 def with_driven(act: Actuation, x, F_c) -> Actuation:
@@ -323,7 +343,7 @@ def with_driven(act: Actuation, x, F_c) -> Actuation:
     if not act.driven:
         return act
     tensions = jnp.asarray(act.tensions, float).at[np.asarray(act.driven)].set(x[6 : 6 + len(act.driven)] * F_c)
-    return Actuation._rebuild(tensions, act.insertions, act.displacements, act.driven)
+    return Actuation._rebuild(tensions, act.insertions, act.displacements, act.driven, act.memory)
 
 
 class Pieces(NamedTuple):
@@ -406,6 +426,7 @@ def integrate(
     forces=None,
     rotation=None,
     paper: Paper | None = None,
+    memory=None,
 ):
     """RK4 over consecutive pieces of ``steps`` steps (``pieces``, one shooting interval), each
     after its jump, from the Carry c; tendon lengths where c.l is not None, arc length for helical
@@ -416,14 +437,19 @@ def integrate(
     n_o), or None (no contact): at its start the piece's N jumps by the point force -sum_o
     lambda_o n_o(p) (contact.py), and the nodes come with each piece start's Starts (position and
     gaps to the obstacles). ``rotation``: ``SolverOptions.rotation``. ``paper``: the paper's
-    printed variants (``Paper``), None for neither."""
-    helical, lengths = is_helical(robot), c.l is not None
+    printed variants (``Paper``), None for neither. ``memory``: with tendon friction, each
+    step's previous-pose tension of the span after it (pieces, steps, n_t) (``next_spans``)."""
+    helical, lengths, friction = is_helical(robot), c.l is not None, robot.has_friction
     f_d = load.distributed_force
     r_fixed = None if helical else tendon_positions(robot, 0.0)[0]
     printed = paper is not None and paper.tendons
+    EA = tendon_stiffness(robot) if lengths and robot.tendons else None
 
     def segment(P: Interval, s, tilt: bool = True) -> Segment:
         return _segment(robot, P, s, tilt) if helical else Segment(P.K_se, P.K_bt, P.rho, P.tau, r_fixed, P.backbone, tilt)
+
+    def carried_tension(P: Interval, c: Carry) -> Interval:
+        return P if c.f is None else P._replace(tau=P.present * c.f.tau)
 
     def field(P: Interval):
         dN = -P.rho * gravity - f_d  # N' = -f: weight and distributed force, constant along the piece
@@ -437,21 +463,48 @@ def integrate(
             return y.rate(dp, u, dN, dM), v, u
 
         def f(c: Carry) -> Carry:
-            seg = segment(P, c.s)
+            Pc = carried_tension(P, c)
+            seg = segment(Pc, c.s)
             dy, v, u = rate(seg, c.y)
             if printed:  # the printed tendon model where a tube is inside
                 dy, v, u = jax.tree.map(
-                    lambda a, b: jnp.where(P.backbone > 0, a, b), rate(segment(P, c.s, False), c.y), (dy, v, u)
+                    lambda a, b: jnp.where(P.backbone > 0, a, b), rate(segment(Pc, c.s, False), c.y), (dy, v, u)
                 )
             dl = None
             if lengths:
-                dl = P.present * jnp.linalg.norm(tendon_pb(seg, v, u), axis=-1)
-            return Carry(dy, None if c.s is None else jnp.ones_like(c.s), dl)
+                dl = P.present * jnp.linalg.norm(tendon_pb(seg, v, u), axis=-1) / (1 + seg.tau / EA)
+            df = None if c.f is None else jax.tree.map(jnp.zeros_like, c.f)
+            return Carry(dy, None if c.s is None else jnp.ones_like(c.s), dl, df)
 
         return f
 
     def project(c: Carry) -> Carry:
         return c._replace(y=c.y.orthonormalized())
+
+    def tangents(P: Interval, c: Carry):
+        """Each tendon's world tangent at the node c (tensions: the span just integrated)."""
+        seg = segment(carried_tension(P, c), c.s)
+        v, u = strains_at(seg, c.y)
+        return jax.vmap(c.y.world)(tendon_tangents(seg, v, u))
+
+    def guides(k: Pieces):
+        """``project``, then the guide at the node ending step j (each node in a channel, those past
+        each disk with ``spacing``): the tension of the span ahead is the previous pose's there,
+        held within the capstan bounds tau_b exp(-phi) and tau_b exp(phi) (``memory``)."""
+
+        def at(c: Carry, x) -> Carry:
+            c = project(c)
+            j, prev = x
+            T = tangents(k.P, c)
+            phi = c.f.phi + k.P.mu * _turning(c.f.T, T)
+            s = k.s0 + (j + 1) * k.h
+            d = jnp.where(k.P.spacing > 0, k.P.spacing, 1.0)
+            guide = (k.P.spacing <= 0) | (jnp.floor(s / d) > jnp.floor((s - k.h) / d))
+            bound = jnp.exp(phi)
+            held = jnp.minimum(jnp.maximum(prev, c.f.base / bound), c.f.base * bound)
+            return c._replace(f=c.f._replace(tau=jnp.where(guide, held, c.f.tau), T=T, phi=phi))
+
+        return at
 
     def transition(k: Pieces, y: State) -> State:
         """Eqs. 31-36 as printed at the first tube's end, strictly inside the robot."""
@@ -463,7 +516,7 @@ def integrate(
         return jax.tree.map(lambda a, b: jnp.where(here, a, b), jumped, y)
 
     def piece(c: Carry, kf):
-        k, f = kf
+        k, f, prev = kf
         y = c.y._replace(N=c.y.N + k.dN, M=c.y.M + k.dM)
         if paper is not None and paper.plan is not None:
             y = transition(k, y)
@@ -471,12 +524,50 @@ def integrate(
         if f is not None:
             F, starts = contact.at_start(load.scene, f, y.p, k.P.radius)
             y = y._replace(N=y.N - F)
-        out = rk4(field(k.P), Carry(carried(y, rotation), k.s0 if helical else None, c.l), k.h, steps, project, path)
+        start = Carry(carried(y, rotation), k.s0 if helical else None, c.l, c.f)
+        if friction:
+            out = rk4(field(k.P), start, k.h, steps, guides(k), path, (jnp.arange(steps), prev))
+        else:
+            out = rk4(field(k.P), start, k.h, steps, project, path)
         end, nodes = out if path else (out, None)
         end, nodes = end._replace(y=uncarried(end.y)), None if nodes is None else nodes._replace(y=uncarried(nodes.y))
         return end._replace(s=None), nodes if f is None else (nodes, starts)
 
-    return lax.scan(piece, coupled(c._replace(s=None), ps, forces), (ps, forces))
+    if friction and c.f is None:
+        P0 = jax.tree.map(lambda a: a[0], ps.P)
+        c = c._replace(f=Friction(P0.tau, P0.tau, jnp.zeros((robot.n_tendons, 3)), jnp.zeros(robot.n_tendons)))
+        c = c._replace(f=c.f._replace(T=tangents(P0, c._replace(y=carried(c.y, rotation), s=ps.s0[0] if helical else None))))
+        memory = jnp.zeros((*ps.h.shape, steps, robot.n_tendons)) if memory is None else memory
+    return lax.scan(piece, coupled(c._replace(s=None), ps, forces, memory), (ps, forces, memory))
+
+
+def _turning(a, b):
+    """The angle between unit vectors a and b, row by row [rad]: atan2(|a x b|, a . b), with
+    derivative zero where they coincide (a straight path)."""
+    w = jnp.cross(a, b)
+    return jnp.arctan2(jnp.sqrt(jnp.sum(w * w, -1) + 1e-300), jnp.sum(a * b, -1))
+
+
+def next_spans(robot: Robot, act: Actuation, P: int, steps: int, g: int):
+    """``integrate``'s memory: the previous pose's tension of the span after each step (the last
+    step's: its own), from ``act.memory``, a node profile (P (steps + 1), n_t) as
+    ``tension_profile`` gives it, shaped (P steps / g, g, n_t); None: zeros (loading from slack)."""
+    n = robot.n_tendons
+    if act.memory is None:
+        return jnp.zeros((P * steps // g, g, n))
+    spans = jnp.reshape(act.memory, (P, steps + 1, n))[:, :-1].reshape(P * steps, n)
+    return jnp.concatenate([spans[1:], spans[-1:]]).reshape(P * steps // g, g, n)
+
+
+def tension_profile(pl: Plan, nodes: Carry):
+    """Each tendon's tension at every node [N], (P (steps + 1), n_t): that of the span starting
+    there (an interval's last node: the span ending there), zero beyond its anchor."""
+    P, m = nodes.y.p.shape[:2]
+    present = pl.intervals.present[:, None, :]
+    if nodes.f is None:
+        return jnp.broadcast_to(pl.intervals.tau[:, None, :], (P, m, present.shape[-1])).reshape(P * m, -1)
+    tau = nodes.f.tau
+    return (jnp.concatenate([tau[:, :-1], tau[:, -2:-1]], 1) * present).reshape(P * m, -1)
 
 
 class Paper(NamedTuple):
@@ -517,7 +608,7 @@ def closing(robot: Robot, act: Actuation, load: Loads, pl: Plan, y: State, lengt
     slack = jnp.zeros(robot.n_tendons, bool)
     if act.driven:
         i = np.asarray(act.driven)
-        gap = displacements(robot, act, lengths)[i] - act.displacements
+        gap = displacements(robot, lengths)[i] - act.displacements
         a, b = act.tensions[i] / F_c, gap / L
         res.append(contact.fischer_burmeister(a, b))
         slack = slack.at[i].set(b > a)
@@ -558,8 +649,9 @@ def shoot(robot: Robot, act: Actuation, load: Loads, gravity, solver, x, F_c, pa
         where = contact.interior_pieces(P, solver.steps, g, scene.every)
         lam = x[6 + n_d :].reshape(-1, scene.n_obstacles) * F_c
         forces = jnp.zeros((ps.h.size, scene.n_obstacles)).at[where].set(lam[:-1])
+    memory = next_spans(robot, act, pl.b.size - 1, solver.steps, g) if robot.has_friction else None
     end, out = integrate(
-        robot, load, gravity, ps, Carry(y0, None, l0), g, path, forces, solver.rotation, paper_variants(solver, pl)
+        robot, load, gravity, ps, Carry(y0, None, l0), g, path, forces, solver.rotation, paper_variants(solver, pl), memory
     )
     nodes, starts = (out, None) if scene is None else out
     if scene is not None:
@@ -589,6 +681,8 @@ def node_quantities(robot: Robot, act, load, gravity, nodes, pl: Plan, tendon_mo
     s = jnp.where(frac < 1, pl.b[:-1, None] + (pl.b[1:] - pl.b[:-1])[:, None] * frac, pl.b[1:, None])
     flat = jax.tree.map(lambda a: a.reshape(K * m, *a.shape[2:]), ys)
     P_nodes = jax.tree.map(lambda a: jnp.repeat(a, m, axis=0), P)
+    if nodes.f is not None:
+        P_nodes = P_nodes._replace(tau=tension_profile(pl, nodes))
 
     def one(args):
         y, P, s = args
@@ -629,6 +723,20 @@ def check_arguments(robot: Robot, act: Actuation, load: Loads, solver) -> None:
     for i, t in enumerate(robot.tendons):
         if t.max_tension is not None and is_concrete(act.tensions) and is_concrete(t.max_tension):
             check_range(f"tensions[{i}]", act.tensions[i], 0.0, float(t.max_tension), unit=f" N (tendons[{i}].max_tension)")
+    if act.memory is not None:
+        n = n_intervals(robot, load) * (solver.steps + 1)
+        if not robot.has_friction:
+            raise ValueError("memory: a tension profile only acts with tendon friction (no section has a friction coefficient)")
+        if tuple(jnp.shape(act.memory)) != (n, n_t):
+            raise ValueError(
+                f"memory has shape {tuple(jnp.shape(act.memory))}: the previous pose's tendon_tension, ({n}, {n_t}) for this "
+                f"robot and loads at steps = {solver.steps} (one row per node)"
+            )
+    if robot.has_friction and solver.intervals > 1:
+        raise ValueError(
+            f"solver intervals = {solver.intervals} with tendon friction: the tendons' tension profiles are carried "
+            "by single shooting only; use intervals = 1"
+        )
     if act.driven and is_concrete_tree(robot):
         with jax.ensure_compile_time_eval():  # under jit, jnp on constants would be traced
             reach = np.asarray(rest_lengths(robot))

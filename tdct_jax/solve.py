@@ -54,6 +54,10 @@ class Solution:
             straight robot less its present rest length there (positive when pulled); for a
             displacement-driven tendon, its command (more than the shape takes up where slack).
         slack: True for a displacement-driven tendon gone slack (its tension exactly 0), (n_t,).
+        tendon_tension: each tendon's tension at every node [N], (n, n_t): its base tension
+            (``tensions``) up to its anchor and zero beyond, unless friction makes it vary along
+            the robot (``Section.friction``); at a node, that of the span starting there. The next
+            pose's ``Actuation(memory=...)`` along a sequence.
     """
 
     s: jax.Array
@@ -74,6 +78,7 @@ class Solution:
     tensions: jax.Array
     displacements: jax.Array
     slack: jax.Array
+    tendon_tension: jax.Array
 
     @property
     def converged(self):
@@ -131,13 +136,13 @@ def _assembled(robot, act, load, gravity, solver, ys, res, info) -> Solution:
     # a slack tendon's tension is zero to round-off at the root (the Fischer-Burmeister row is
     # linear in it there): reported as exactly zero; a driven tendon's encoder reads its command
     tensions = jnp.where(slack, 0.0, jnp.asarray(act.tensions, float))
-    displacements = rod.displacements(robot, act, lengths)
+    displacements = rod.displacements(robot, lengths)
     if act.driven:
         displacements = displacements.at[np.asarray(act.driven)].set(act.displacements)
     result = info.result if touching is None else status.contact_result(info.result, touching.gap, 2 * solver.tol * robot.length)
     return Solution(
         s, y.p, y.R, n, m, y.N, y.M, v, u, res, jnp.max(jnp.abs(res)), info.iterations, info.stages, result, touching,
-        tensions, displacements, slack,
+        tensions, displacements, slack, rod.tension_profile(pl, nodes),
     )  # fmt: skip
 
 

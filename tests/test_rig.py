@@ -64,9 +64,15 @@ TRUTH = {
 
 @pytest.fixture(scope="module")
 def lab():
-    """The robot file's rig with gravity on, across the robot (azimuth 90 degrees: along +y)."""
-    rig = rigs.Rig.from_toml(DATA / "robot.toml")
+    """The robot file's rig with gravity on, across the robot (azimuth 90 degrees: along +y), without
+    its tendon friction (test_friction.py has the rig with it)."""
+    rig = frictionless(rigs.Rig.from_toml(DATA / "robot.toml"))
     return dataclasses.replace(rig, g=9.81, gravity_azimuth=np.pi / 2, gravity_elevation=0.0)
+
+
+def frictionless(rig):
+    sections = tuple(dataclasses.replace(s, friction=None) for s in rig.robot.sections)
+    return dataclasses.replace(rig, robot=dataclasses.replace(rig.robot, sections=sections))
 
 
 @pytest.fixture(scope="module")
@@ -154,7 +160,7 @@ def test_pretension_holds_the_straight_robot(lab):
     seg = np.repeat(np.arange(3), 3)
     angles = np.radians([-174.0, -142.0, -120.0])[seg] + 2 * np.pi / 3 * np.tile(np.arange(3), 3)
     rig = rigs.replace(dataclasses.replace(lab, g=0.0), {f"tendons[{i}].angle": float(a) for i, a in enumerate(angles)})
-    tip, unknowns, codes = rigs.along(rig, jnp.zeros((N, 9)), RIG_SOLVER)
+    tip, unknowns, codes, _ = rigs.along(rig, jnp.zeros((N, 9)), RIG_SOLVER)
     assert np.all(np.asarray(codes) == 0)
     np.testing.assert_allclose(np.asarray(tip)[0, :2], 0.0, atol=1e-12)
 
@@ -173,7 +179,7 @@ def test_pretension_holds_the_straight_robot(lab):
 def test_a_rig_from_a_file_and_one_set_in_python_run_one_program(lab):
     """Python floats and numpy scalars become the same leaves (float64, not weakly typed), so the
     fixture's rig and the file's, as the command line reads it, share their compiled programs."""
-    rig = rigs.Rig.from_toml(DATA / "robot.toml")
+    rig = frictionless(rigs.Rig.from_toml(DATA / "robot.toml"))
     assert [jax.typeof(x) for x in jax.tree.leaves(rig)] == [jax.typeof(x) for x in jax.tree.leaves(lab)]
     assert jax.typeof(lab.g) == jax.typeof(np.float64(0.0))
 
@@ -250,21 +256,21 @@ def test_cli_calibrates_a_slice_end_to_end(tmp_path, capsys, monkeypatch):
     along = rigs.along
 
     def failing(rig, servos, solver):
-        tip, x, codes = along(rig, servos, solver)
+        tip, x, codes, profiles = along(rig, servos, solver)
         if np.array_equal(servos, train_servos):
-            return tip, x, codes.at[np.array([5, 9])].set(tdct.status.NEWTON_LIMIT)
+            return tip, x, codes.at[np.array([5, 9])].set(tdct.status.NEWTON_LIMIT), profiles
         if np.array_equal(servos, train_servos[::-1]):
-            return tip, x, codes.at[N - 1 - 9].set(tdct.status.NEWTON_LIMIT)
-        return tip, x, codes  # the validation file
+            return tip, x, codes.at[N - 1 - 9].set(tdct.status.NEWTON_LIMIT), profiles
+        return tip, x, codes, profiles  # the validation file
 
     train_servos = read_dataset(DATA / "dataset.toml").train.displacements[:N]
     monkeypatch.setattr(rigs, "along", failing)
     fit_step, guesses = calibrate_rig._fit_step, []
 
     def losing(x, rig, servos, start, *rest):  # the first trial step loses sample 3 from its last solution
-        r, J, unknowns, codes = fit_step(x, rig, servos, start, *rest)
+        r, J, unknowns, codes, profiles = fit_step(x, rig, servos, start, *rest)
         guesses.append(np.asarray(start))
-        return r, J, unknowns, codes.at[3].set(tdct.status.NEWTON_LIMIT) if len(guesses) == 2 else codes
+        return r, J, unknowns, codes.at[3].set(tdct.status.NEWTON_LIMIT) if len(guesses) == 2 else codes, profiles
 
     monkeypatch.setattr(calibrate_rig, "_fit_step", losing)
     for name, keep in (("train.csv", N), ("val.csv", N), ("tendon_pull.csv", 200)):
