@@ -460,7 +460,7 @@ def _from_neighbours(rig: rigs.Rig, servos, solver: SolverOptions):
     the solutions of a pass from the end backward (their neighbour after), each with its memory
     from the forward pass (friction's memory runs forward only): tips, unknowns, codes and tension
     profiles (numpy; profiles None without friction)."""
-    out = [None if a is None else np.asarray(a) for a in rigs.along(rig, servos, solver)]
+    out = [None if a is None else np.array(a) for a in rigs.along(rig, servos, solver)]
     failed = np.flatnonzero(out[2] != status.SUCCESS)
     if failed.size:
         _, back, codes, _ = (None if a is None else np.asarray(a)[::-1] for a in rigs.along(rig, servos[::-1], solver))

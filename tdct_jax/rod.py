@@ -443,7 +443,7 @@ def integrate(
     f_d = load.distributed_force
     r_fixed = None if helical else tendon_positions(robot, 0.0)[0]
     printed = paper is not None and paper.tendons
-    EA = tendon_stiffness(robot) if lengths and robot.tendons else None
+    EA = tendon_stiffness(robot) if robot.tendons else jnp.zeros(0)
 
     def segment(P: Interval, s, tilt: bool = True) -> Segment:
         return _segment(robot, P, s, tilt) if helical else Segment(P.K_se, P.K_bt, P.rho, P.tau, r_fixed, P.backbone, tilt)

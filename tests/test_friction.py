@@ -173,6 +173,7 @@ def cycle_servos():
     return np.stack([one, -one / 2, -one / 2], axis=1)
 
 
+@pytest.mark.slow
 def test_a_recording_predicted_in_order_carries_the_memory(rig, cycle_servos):
     """Along a pull-release cycle the tips at equal servo readings differ with friction (the loop)
     and agree without it; the second release retraces the first (the pull to the same peak wipes
@@ -188,6 +189,7 @@ def test_a_recording_predicted_in_order_carries_the_memory(rig, cycle_servos):
     np.testing.assert_allclose(tips[0.15][25:], tips[0.15][9:17], rtol=0, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_friction_is_calibrated_with_the_rest(rig, cycle_servos):
     """From a recording made with mu = 0.15 (0.05 mm noise), a fit started at mu = 0.05 finds it
     with the servo scale and the registration; the truth lies within 3 standard errors."""
