@@ -8,7 +8,6 @@ import dataclasses
 import importlib
 import json
 import re
-import re
 import shutil
 from pathlib import Path
 
