@@ -111,6 +111,8 @@ def main() -> None:
     }
     runs["with friction"]["val"] = after
     pairs = equal_servo_pairs(data.train, data.validation)
+    solved = np.all([np.concatenate([run["train"].codes, run["val"].codes]) == 0 for run in runs.values()], axis=0)
+    pairs = pairs[solved[pairs].all(axis=1)]  # a sample that did not solve has no tip to compare
     measured = np.vstack([runs["memoryless"]["train"].measured, after.measured])
     tips = {name: np.vstack([run["train"].tips, run["val"].tips]) for name, run in runs.items()}
     scores = {name: pair_score(t, measured, pairs) for name, t in tips.items()}
