@@ -73,29 +73,20 @@ def _coordinates(values, params) -> np.ndarray:
 
 @partial(jax.jit, static_argnames=("params", "solver"))
 def _fit_step(x, rig, servos, guesses, measured, params, solver):
-    """Tip residuals (3 n,) [m], their exact Jacobian in x, the unknowns found and status codes."""
+    """Tip residuals (3 n,) [m], their exact Jacobian in x, the unknowns found and status codes.
+    Each sample starts from its guess, side by side; with tendon friction the samples are solved
+    in order instead (``rig.along``; ``guesses`` unused), each with the last one's tension profile
+    as memory, so that forward mode carries each parameter's tangent through the memory too
+    (about twice the cost of the sequence itself)."""
 
     def residual(x):
-        # warm starts need no load ramp from zero, and under vmap one failing sample would make
-        # every sample run all of its stages
-        warm = dataclasses.replace(solver, stages=(1,))
-        tip, unknowns, code, _ = rigs._batch(rigs.replace(rig, _values(x, params)), servos, guesses, warm)
-        r = (tip - measured).ravel()
-        return r, (r, unknowns, code)
-
-    J, (r, unknowns, codes) = jax.jacfwd(residual, has_aux=True)(x)
-    return r, J, unknowns, codes
-
-
-@partial(jax.jit, static_argnames=("params", "solver"))
-def _fit_along(x, rig, servos, measured, params, solver):
-    """``_fit_step`` with tendon friction: the samples solved in order (``rig.along``), each with
-    the last one's tension profile as memory, so that the Jacobian is exact through the memory
-    too (forward mode carries each parameter's tangent along the sequence); about twice the cost
-    of the sequence itself."""
-
-    def residual(x):
-        tip, unknowns, code, _ = rigs._along(rigs.replace(rig, _values(x, params)), servos, solver)
+        fitted = rigs.replace(rig, _values(x, params))
+        if rig.robot.has_friction:
+            tip, unknowns, code, _ = rigs._along(fitted, servos, solver)
+        else:
+            # warm starts need no load ramp from zero, and under vmap one failing sample would make
+            # every sample run all of its stages
+            tip, unknowns, code, _ = rigs._batch(fitted, servos, guesses, dataclasses.replace(solver, stages=(1,)))
         r = (tip - measured).ravel()
         return r, (r, unknowns, code)
 
@@ -393,8 +384,8 @@ def fit_recording(
         return r, J, unknowns, codes
 
     def evaluate(x):
-        if rig.robot.has_friction:  # the memory runs along the recording: in order
-            out = _fit_along(jnp.asarray(x), rig, servos, measured, params, solver)
+        if rig.robot.has_friction:  # in order: no lost sample to reach another way
+            out = _fit_step(jnp.asarray(x), rig, servos, guesses[0], measured, params, solver)
         else:
             out = side_by_side(x)
         r, J, unknowns, codes = (np.asarray(a) for a in out)
@@ -464,7 +455,8 @@ def _from_neighbours(rig: rigs.Rig, servos, solver: SolverOptions):
     failed = np.flatnonzero(out[2] != status.SUCCESS)
     if failed.size:
         _, back, codes, _ = (None if a is None else np.asarray(a)[::-1] for a in rigs.along(rig, servos[::-1], solver))
-        failed, back = failed[codes[failed] == status.SUCCESS], back[failed[codes[failed] == status.SUCCESS]]
+        failed = failed[codes[failed] == status.SUCCESS]
+        back = back[failed]
     if failed.size:
         memory = rigs.memories(out[3])
         again = rigs._batch(rig, servos[failed], jnp.asarray(back), solver, None if memory is None else memory[failed])
