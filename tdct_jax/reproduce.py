@@ -188,10 +188,13 @@ def _fig14(robot, grids, out, opts, say):
     ten = paper.ten_capacities(robot, **opts)
     plotting.plot_fig14(res, (paper.CAPACITY_INSERTIONS, paper.PAPER_CAPACITIES_G), out / "fig14_load_capacity.png")
     rows = []
+    # Robot.paper()'s tendon offset and density are the fit to these ten capacities (_fit)
+    fitted = all(fields.get(robot, k) == fields.get(Robot.paper(), k) for k in ("tendons[*].offset", "sections[*].density"))
     for i, d in enumerate(paper.CAPACITY_INSERTIONS):
         for j, t in enumerate(paper.CAPACITY_TENSIONS):
             ok = bool(ten.converged[i, j])
             note = f"tube {1e3 * d:g} mm, tendon 1 at {t:g} N" + ("" if ok else "; NOT converged")
+            note += "; tendon offset and density fitted to these ten capacities: not an independent check" if fitted else ""
             rows.append(_row("load capacity", ten.mass[i, j] / paper.G, paper.PAPER_CAPACITIES_G[i][j], "g", note))
     return rows
 
