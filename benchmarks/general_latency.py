@@ -1,6 +1,10 @@
 """Warm single-solve latency of the paper robot (``tdct.Robot.paper()``) and of the two-segment
 six-tendon robot, interleaved in one process.
 
+The two-segment robot's three anchors at its section end, and a point mass there, are one
+breakpoint (``Robot.merged``); the same robot with each its own zero-length interval (``merged``
+None, as when its breakpoints are traced) is timed beside it, with each one's node count.
+
 Run: python benchmarks/general_latency.py [--rounds 30] [--base PATH]
 With ``--base PATH`` (a copy of an earlier ``tdct_jax`` package renamed ``tdct_base``, in PATH),
 that version's paper-robot solve (its own API: ``tdct_base.Robot()``, ``TipLoad.from_mass``) is
@@ -13,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 import time
 from pathlib import Path
@@ -22,6 +27,7 @@ from _common import write_result
 
 import tdct_jax as tdct
 from tdct_jax.description import ROBOTS
+from tdct_jax.tree import unchecked
 
 PAPER = [((6.0, 0, 0, 0), 0.080, 0.020), ((3.0, 0, 0, 5.0), 0.120, 0.0)]
 TWO_SEGMENT = [1.5, 0.0, 0.4, 0.0, 0.8, 0.3]
@@ -49,9 +55,13 @@ def main() -> None:
     if args.base:
         sys.path.insert(0, args.base)
         runs = {"base Robot": base_runner(importlib.import_module("tdct_base"))} | runs
-    two = tdct.Robot.from_toml(ROBOTS / "two_segment.toml")
+    two = tdct.Robot.from_toml(ROBOTS / "two_segment.toml").replace(masses=(tdct.PointMass(0.2, 0.005),))
+    apart = unchecked(tdct.Robot, **vars(two) | {"merged": None})
     act = tdct.Actuation(TWO_SEGMENT)
-    runs["two_segment.toml"] = [lambda: tdct.solve(two, act).position.block_until_ready()]
+    nodes = {}
+    for name, robot in (("two_segment.toml + mass at 0.2 m", two), ("the same, breakpoints not merged", apart)):
+        runs[name] = [lambda robot=robot: tdct.solve(robot, act).position.block_until_ready()]
+        nodes[name] = int(tdct.solve(robot, act).s.size)
     compile_s = {}
     for name, fs in runs.items():
         t = time.perf_counter()
@@ -71,9 +81,9 @@ def main() -> None:
         for i, ts in enumerate(per_case):
             ms = np.array(ts) * 1e3
             rows.append(dict(robot=name, case=i, median_ms=float(np.median(ms)), p25_ms=float(np.percentile(ms, 25))))
-            print(f"{name:22s} case {i}: median {rows[-1]['median_ms']:.3f} ms, p25 {rows[-1]['p25_ms']:.3f} ms")
+            print(f"{name:34s} case {i}: median {rows[-1]['median_ms']:.3f} ms, p25 {rows[-1]['p25_ms']:.3f} ms")
     out = Path(__file__).parent / "results" / "general_latency.json"
-    write_result(out, rounds=args.rounds, compile_and_first_s=compile_s, rows=rows)
+    write_result(out, rounds=args.rounds, load_average=os.getloadavg(), nodes=nodes, compile_and_first_s=compile_s, rows=rows)
 
 
 if __name__ == "__main__":

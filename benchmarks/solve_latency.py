@@ -8,8 +8,9 @@ by side in one process, the variants alternated call by call: warm solves of CON
 small vmapped batch, compile times, and the agreement with single shooting of tips, implicit
 derivatives d tip / d(tensions, insertion, sections[*].E) and compliance; writes
 benchmarks/results/multiple_shooting.json (multiple_shooting_quick.json with --quick).
-With --general 7,14: the same for the shipped two-segment robot (a Robot with a point
-load at 0.1 m and a point mass at 0.3 m: 7 breakpoint intervals, K dividing 7 x steps), by
+With --general 4,8: the same for the shipped two-segment robot (a Robot with a point
+load at 0.1 m and a point mass at 0.3 m: 4 breakpoint intervals, its section end and the three
+anchors there one breakpoint, K dividing 4 x steps), by
 tensions and by displacements (four tendons driven), tips and compliance compared; writes
 benchmarks/results/multiple_shooting_general.json.
 """
@@ -48,7 +49,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=STEPS)
     parser.add_argument("--quick", action="store_true", help="20 repeats")
     parser.add_argument("--intervals", help="compare single shooting with these K, e.g. 2,4,8")
-    parser.add_argument("--general", help="the same for the two-segment robot, e.g. 7,14")
+    parser.add_argument("--general", help="the same for the two-segment robot, e.g. 4,8")
     args = parser.parse_args()
     repeats = 20 if args.quick else args.repeats
     if args.general:

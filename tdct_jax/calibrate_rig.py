@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import warnings
 from collections.abc import Mapping, Sequence
 from functools import partial
 from pathlib import Path
@@ -30,7 +31,7 @@ from tqdm import tqdm
 
 from . import rig as rigs
 from . import rod, status
-from .checks import check_integer, deprecated
+from .checks import UnitWarning, check_integer, deprecated
 from .data import _error
 from .lm import covariance, levenberg_marquardt
 from .options import SolverOptions
@@ -110,7 +111,9 @@ class RigCalibration:
             after each accepted step.
         noise: residual standard deviation per coordinate [m].
         left_out: the file lines of the samples left out of the fit: those that solve neither
-            from the straight robot nor from a neighbour in the sequence at the starting values.
+            from the straight robot nor from a neighbour in the sequence at the starting values
+            (with tendon friction, also those the fit's in-order chain does not reach from the
+            sample kept before them).
         geometry: the geometry step's findings (``identify_geometry``), or None without pulls;
             ``initial`` holds the values after it.
         iterations, result, message: Levenberg-Marquardt's outcome (``converged``: result ==
@@ -354,7 +357,12 @@ def fit_recording(
     bar.set_postfix_str("solving along the recording (compiling)")
     tip, unknowns, codes, _ = _from_neighbours(rig, servos, solver)
     keep = np.flatnonzero(codes == status.SUCCESS)
-    left_out = tuple(int(line) for line in np.asarray(recording.lines)[codes != status.SUCCESS])
+    while rig.robot.has_friction and keep.size:  # the fit solves in order: what that chain cannot reach stays out
+        reached = np.asarray(rigs.along(rig, servos[keep], solver)[2]) == status.SUCCESS
+        if reached.all():
+            break
+        keep = keep[reached]
+    left_out = tuple(int(line) for line in np.delete(np.asarray(recording.lines), keep))
     if keep.size == 0:
         raise status.ConvergenceError(
             f"{recording.path}: no sample solves at the starting values (first code {int(codes[0])}): "
@@ -439,9 +447,12 @@ def calibrate_rig(rig: rigs.Rig, recording: Recording, params: Sequence[str] = R
 
 def _trial(rig: rigs.Rig, x, params):
     """The rig at a trial step's fitted coordinates x, or None where a value there is out of range
-    (a step so long that a value fitted in log space underflows: the step fails as it is)."""
+    (a step so long that a value fitted in log space underflows: the step fails as it is). Trial
+    values get no UnitWarning; the fitted ones do."""
     try:
-        return rigs.replace(rig, {p: float(v) for p, v in _values(jnp.asarray(x), params).items()})
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UnitWarning)
+            return rigs.replace(rig, {p: float(v) for p, v in _values(jnp.asarray(x), params).items()})
     except ValueError:
         return None
 

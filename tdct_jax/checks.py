@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import numbers
+import re
 import sys
 import tempfile
 import tomllib
@@ -150,76 +152,193 @@ class UnitWarning(UserWarning):
 
 
 MILLIMETRES = ((1e-3, "millimetres"),)
+LENGTHS = ((1e-3, "millimetres"), (1e-2, "centimetres"))
+MODULI = ((1e3, "kPa"), (1e6, "MPa"), (1e9, "GPa"))
 PLAUSIBLE = {
-    # name: (SI unit, lowest, highest, typical, other units it may have been typed in: (1 of them in SI, name))
-    "length": ("m", 5e-3, 5.0, 0.16, ((1e-3, "millimetres"), (1e-2, "centimetres"))),
-    "outer_diameter": ("m", 0.0, 0.5, 0.02, MILLIMETRES),
-    "channel_diameter": ("m", 0.0, 0.5, 1.5e-3, MILLIMETRES),
-    "tendon_offset": ("m", 0.0, 0.5, 7e-3, MILLIMETRES),
-    "tendon_channel_diameter": ("m", 0.0, 0.5, 1e-3, MILLIMETRES),
-    "tube_outer_diameter": ("m", 0.0, 0.5, 1.4e-3, MILLIMETRES),
-    "tube_inner_diameter": ("m", 0.0, 0.5, 1.1e-3, MILLIMETRES),
-    "E_silicone": ("Pa", 1e3, 1e9, 1e6, ((1e6, "MPa"), (1e9, "GPa"), (1e3, "kPa"))),
-    "E_tube": ("Pa", 1e7, 1e12, 1e11, ((1e6, "MPa"), (1e9, "GPa"), (1e3, "kPa"))),
-    "density_silicone": ("kg/m^3", 100.0, 3e4, 1500.0, ((1e3, "g/cm^3"),)),
-    "density_tube": ("kg/m^3", 100.0, 3e4, 6500.0, ((1e3, "g/cm^3"),)),
-    "gravity": ("m/s^2", 0.0, 100.0, 9.81, ((1e-3, "mm/s^2"),)),
+    # kind: (SI unit, lowest, highest, (lowest, highest) typical, other units it may have been typed in: (1 of them in SI, name))
+    "length": ("m", 5e-3, 5.0, (0.02, 1.0), LENGTHS),
+    "spacing": ("m", 0.0, 5.0, (1e-3, 0.1), LENGTHS),
+    "diameter": ("m", 0.0, 0.5, (1e-4, 0.1), MILLIMETRES),
+    "tendon offset": ("m", 0.0, 0.5, (1e-3, 0.1), MILLIMETRES),
+    "Young's modulus": ("Pa", 1e3, 1e12, (1e5, 2.5e11), MODULI),  # silicone to steel
+    "silicone modulus": ("Pa", 1e3, 1e9, (1e4, 1e8), MODULI),
+    "tube modulus": ("Pa", 1e7, 1e12, (1e9, 2.5e11), MODULI),  # polymer to steel
+    "density": ("kg/m^3", 100.0, 1e6, (500.0, 2e4), ((1e3, "g/cm^3"),)),  # 1e6: spacer disks lumped into a thin backbone
+    "point mass": ("kg", 0.0, 10.0, (1e-4, 1.0), ((1e-3, "grams"),)),
+    "angle": ("rad", 0.0, 2 * math.pi, (0.01, 2 * math.pi), ((math.pi / 180, "degrees"),)),
+    "twist": ("rad/m", 0.0, 2e3, (1.0, 2e3), ((math.pi / 180, "degrees per metre"),)),
+    "tension": ("N", 0.0, 1e4, (0.01, 1e3), ()),
+    "axial stiffness": ("N", 1.0, 1e8, (10.0, 1e7), ()),
+    "gravity": ("m/s^2", 0.0, 100.0, (1.0, 30.0), ((1e-3, "mm/s^2"),)),
 }
-"""Magnitudes far outside any TDCT-like robot, by field (gravity: the vector's magnitude): there a
-value is no error but gets a UnitWarning naming the unit it was probably typed in (of several that
-would make it plausible, the one that lands nearest the typical value, in decades). Zero is never
-flagged. The one place for these ranges."""
+"""Magnitudes far outside any TDCT-like robot, by kind of quantity (gravity: the vector's
+magnitude): there a value is no error but gets a UnitWarning naming the units it was probably typed
+in: those of its other units that make it typical, nearest the typical range's middle (in decades)
+first, or else the one that makes it plausible nearest that range. Zero is never flagged. The one
+place for these ranges; ``KINDS`` says which fields they apply to."""
+
+KINDS = {
+    "Robot": dict(length="length"),
+    "Section": dict(
+        end=None,  # in (0, length]: the length's note covers it
+        outer_diameter="diameter",
+        E="Young's modulus",
+        nu=None,
+        density="density",
+        inner_diameter="diameter",
+        tendon_channel_diameter="diameter",
+        friction=None,
+        guide_spacing="spacing",
+    ),
+    "Tendon": dict(
+        offset="tendon offset", angle="angle", twist="twist", end=None, max_tension="tension", stiffness="axial stiffness"
+    ),
+    "Tube": dict(outer_diameter="diameter", inner_diameter="diameter", E="tube modulus", nu=None, density="density"),
+    "PointMass": dict(s=None, mass="point mass"),
+    "paper": dict(  # Robot.paper's Table II names
+        length=None,  # the Robot's own note
+        outer_diameter="diameter",
+        channel_diameter="diameter",
+        tendon_offset="tendon offset",
+        tendon_angles="angle",
+        tendon_channel_diameter="diameter",
+        E_silicone="silicone modulus",
+        nu_silicone=None,
+        density_silicone="density",
+        tube_outer_diameter="diameter",
+        tube_inner_diameter="diameter",
+        E_tube="tube modulus",
+        nu_tube=None,
+        density_tube="density",
+        calibrated_tension=None,
+        calibrated_tip_force=None,
+    ),
+}
+"""The kind (``PLAUSIBLE``) of every field of the robot's classes and of ``Robot.paper``'s names;
+None: no unit to mistake (a ratio), a place in [0, length] (the length's note covers it), or a
+calibrated range."""
 
 
 TARGET_REACH = (0.01, 10.0)
-"""Distances of a tip target from the base, in robot lengths, outside which (but for 0) a target was
-probably typed in another unit: no tip gets there (a note, not an error; the IK answers with the
-nearest pose)."""
+"""Distances from the base, in robot lengths, outside which (but for 0) a tip target, a recorded
+tip or an obstacle was probably typed in another unit: no tip gets there (a note, not an error;
+the IK answers with the nearest pose)."""
 
 
-def target_note(name: str, position, length: float, typed_in_mm: bool = False) -> str | None:
-    """A note for tip target(s) ``position`` [m] (the counted components; any leading axes) that
-    lie farther than ``TARGET_REACH`` robot lengths from the base, as if typed in millimetres, or,
-    for values typed in millimetres (``typed_in_mm``), nearer than its lower end, as if typed in
-    metres; None otherwise."""
-    d = np.linalg.norm(np.atleast_2d(np.asarray(position, dtype=float)), axis=-1)
+def reach_note(name: str, distance, length: float, typed_in_mm: bool = False, mean: bool = False) -> str | None:
+    """A note for distances [m] from the base (any shape) of which the largest (``mean``: their
+    mean) lies farther than ``TARGET_REACH`` robot lengths, as if typed in millimetres, or, for
+    values typed in millimetres (``typed_in_mm``), the smallest non-zero one (``mean``: their mean)
+    nearer than its lower end, as if typed in metres; None otherwise."""
+    d = np.ravel(np.asarray(distance, dtype=float))
     lo, hi = TARGET_REACH
-    far, near = d.max() / length, d[d > 0].min(initial=np.inf) / length
-    if not typed_in_mm and far > hi:
+    far = d.mean() if mean else d.max()
+    near = d.mean() if mean else d[d > 0].min(initial=np.inf)
+    if not typed_in_mm and far > hi * length:
         return (
-            f"{name}: {d.max():g} m from the base is {far:.3g} robot lengths away, where no tip reaches: "
-            f"positions are in metres; did you mean millimetres ({d.max() / 1e3:g} m)?"
+            f"{name}: {far:g} m from the base is {far / length:.3g} robot lengths away, where no tip reaches: "
+            f"positions are in metres; did you mean millimetres ({far / 1e3:g} m)?"
         )
-    if typed_in_mm and near < lo:
+    if typed_in_mm and 0 < near < lo * length:
         return (
-            f"{name}: {1e3 * near * length:g} mm from the base is {near:.2g} robot lengths away: "
-            f"did you type metres ({1e6 * near * length:g} mm)?"
+            f"{name}: {1e3 * near:g} mm from the base is {near / length:.2g} robot lengths away: "
+            f"did you type metres ({1e6 * near:g} mm)?"
         )
     return None
 
 
-def plausibility_note(name: str, value, label: str | None = None) -> str | None:
-    """A note for a concrete scalar whose magnitude lies far outside ``PLAUSIBLE[name]``, naming
-    the unit it was probably typed in (and the value as ``label``, default ``name``); None when
-    plausible, zero, traced or not in the table."""
-    if name not in PLAUSIBLE or not is_concrete(value) or np.size(value) != 1:
+def target_note(name: str, position, length: float, typed_in_mm: bool = False) -> str | None:
+    """``reach_note`` for tip target(s) ``position`` [m] (the counted components; any leading axes)."""
+    return reach_note(name, np.linalg.norm(np.atleast_2d(np.asarray(position, dtype=float)), axis=-1), length, typed_in_mm)
+
+
+def plausibility_note(kind: str, value, label: str) -> str | None:
+    """A note for a concrete value (any shape: its first offending element) whose magnitude lies
+    far outside ``PLAUSIBLE[kind]``, naming the units it was probably typed in; None when
+    plausible, zero, traced or None."""
+    if value is None or not is_concrete(value):
         return None
-    v = abs(float(np.asarray(value, dtype=float).ravel()[0]))
-    unit, lo, hi, typical, others = PLAUSIBLE[name]
-    if v == 0.0 or lo <= v <= hi:
+    a = np.abs(np.ravel(np.asarray(value, dtype=float)))
+    unit, lo, hi, (low, high), others = PLAUSIBLE[kind]
+    bad = np.flatnonzero((a != 0) & ((a < lo) | (a > hi)))
+    if not bad.size:
         return None
-    fits = [(abs(math.log10(v * f / typical)), f, u) for f, u in others if lo <= v * f <= hi]
-    text = f"{label or name} = {v:g} {unit} is far outside the plausible range [{lo:g}, {hi:g}] {unit}"
+    v = float(a[bad[0]])
+    label = label if np.ndim(value) == 0 else f"{label}[{bad[0]}]"
+    text = f"{label} = {v:g} {unit} is far outside the plausible range [{lo:g}, {hi:g}] {unit}"
+    middle = math.log10(low * high) / 2
+    fits = sorted((abs(math.log10(v * f) - middle), low <= v * f <= high, f, u) for f, u in others if lo <= v * f <= hi)
     if not fits:
         return f"{text}: check its unit (SI)"
-    _, factor, other = min(fits)
-    return f"{text}: did you mean {v:g} {other} ({v * factor:g} {unit})?"
+    named = [(f, u) for _, typical, f, u in fits if typical] or [fits[0][2:]]
+    guesses = [f"{v:g} {u} ({v * f:g} {unit})" for f, u in named]
+    said = guesses[0] if len(guesses) == 1 else f"{', '.join(guesses[:-1])} or {guesses[-1]}"
+    return f"{text}: did you mean {said}?"
+
+
+def warn_implausible(what: str, values, prefix: str = "") -> None:
+    """UnitWarnings (``plausibility_note``) for the fields of ``what`` (a key of ``KINDS``) in
+    ``values`` (an object, or a dict by name), each labelled ``prefix`` + its name."""
+    for name, kind in KINDS[what].items():
+        value = values[name] if isinstance(values, dict) else getattr(values, name)
+        note = kind and plausibility_note(kind, value, prefix + name)
+        if note:
+            warn_user(note, UnitWarning)
+
+
+def size_note(length, sizes: dict) -> str | None:
+    """A note when the largest of ``sizes`` (label: a tendon offset or a diameter [m], concrete)
+    exceeds the robot's ``length`` [m]: one of them was probably typed in another unit."""
+    label, v = max(((k, float(x)) for k, x in sizes.items()), key=lambda kv: kv[1], default=("", 0.0))
+    if not v > float(length):
+        return None
+    return (
+        f"{label} = {v:g} m is larger than the robot's length = {float(length):g} m: is one of them in another unit (SI: metres)?"
+    )
+
+
+def merged(notes: list[str]) -> list[str]:
+    """Notes that differ only in the item they name (``tendons[0].offset = 10 m ...``,
+    ``tendons[1].offset = 10 m ...``) as one naming the items as a range (``tendons[0-1].offset
+    = 10 m ...``), in the order first seen."""
+    groups: dict[str, dict] = {}
+    for note in notes:
+        label, _, rest = note.partition(" = ")
+        m = re.fullmatch(r"(\w+)\[(\d+)\]\.(\w+)", label)
+        key = (m[1], m[3]) if m else (label, None)
+        groups.setdefault(rest, {}).setdefault(key, []).append(int(m[2]) if m else None)
+    out = []
+    for rest, labels in groups.items():
+        names = []
+        for (kind, field), index in labels.items():
+            if field is None:
+                names.append(kind)
+                continue
+            runs = np.split(np.asarray(index), np.flatnonzero(np.diff(index) != 1) + 1)
+            names += [f"{kind}[{r[0]}{'' if len(r) == 1 else f'-{r[-1]}'}].{field}" for r in runs]
+        out.append(f"{', '.join(names)} = {rest}")
+    return out
+
+
+@contextlib.contextmanager
+def relabelled_notes(relabel=str):
+    """UnitWarnings raised inside, ``merged`` and warned again with ``relabel(note)`` as their text
+    (attributed to the caller's code) when the block ends without an error; other warnings pass."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UnitWarning)
+        yield
+    for w in caught:
+        if not issubclass(w.category, UnitWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    for note in merged([str(w.message) for w in caught if issubclass(w.category, UnitWarning)]):
+        warn_user(relabel(note), UnitWarning)
 
 
 def warn_user(message: str, category=UserWarning) -> None:
-    """``warnings.warn`` attributed to the first caller outside tdct_jax."""
+    """``warnings.warn`` attributed to the first caller outside tdct_jax (and the contextlib and
+    dataclasses code it runs through)."""
     level, frame = 2, sys._getframe(1)
-    while frame is not None and frame.f_globals.get("__name__", "").startswith("tdct_jax"):
+    while frame is not None and frame.f_globals.get("__name__", "").startswith(("tdct_jax", "contextlib", "dataclasses")):
         frame, level = frame.f_back, level + 1
     warnings.warn(message, category, stacklevel=level)
 

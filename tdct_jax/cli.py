@@ -20,8 +20,9 @@ from . import fields, rod, status
 from .checks import UnitWarning, check_output, interval, target_note
 from .description import CalibrationWarning, Robot
 from .ik import MAX_STEPS as IK_MAX_STEPS
+from .ik.starts import STARTS as IK_STARTS
 from .inputs import STANDARD_GRAVITY, Actuation, Loads
-from .mechanics import compliance, compliance_ellipsoid
+from .mechanics import compliance, compliance_and_solution, compliance_ellipsoid
 from .options import MAX_ITER, STEPS, SolverOptions
 from .scene import read_scene
 from .solve import check_solution, solve
@@ -160,6 +161,10 @@ def check_count(flag: str, value, n: int, what: str) -> None:
 
 
 LISTS_HELP = "Lists are comma-separated; negative values may be typed as they are (--tip-force -0.15,0,0)."
+SCENE_HELP = (
+    "obstacles the robot rests on or presses against, SI units (docs/contact.md): frictionless contact along the body "
+    "and at the tip"
+)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -244,16 +249,16 @@ def _parser() -> argparse.ArgumentParser:
     p = verbs.add_parser("solve", parents=[common], help="solve one static shape and print the tip pose", epilog=LISTS_HELP)
     p.add_argument("--plot", metavar="shape.png", help="save a side view and a 3D view of the shape")
     p.add_argument("--csv", metavar="shape.csv", help="save the shape as s_mm,x_mm,y_mm,z_mm")
-    p.add_argument(
-        "--scene",
-        metavar="scene.toml",
-        help="obstacles the robot rests on or presses against, SI units (docs/contact.md): frictionless contact "
-        "along the body and at the tip, the contacts printed and drawn",
-    )
+    p.add_argument("--scene", metavar="scene.toml", help=SCENE_HELP + ", the contacts printed and drawn")
     c = verbs.add_parser(
         "compliance", parents=[common], help="exact tip compliance matrix (eq. 41) and its ellipsoid", epilog=LISTS_HELP
     )
     c.add_argument("--plot", metavar="ellipse.png", help="save the ellipsoid projected on its two largest axes")
+    c.add_argument(
+        "--scene",
+        metavar="scene.toml",
+        help=SCENE_HELP + ": the compliance in contact (the touching candidates held on their obstacles), the contacts printed",
+    )
     r = verbs.add_parser("reproduce", parents=[cached], help="regenerate the paper's simulation figures and headline numbers")
     r.add_argument("--out", default="tdct-reproduce", metavar="DIR", help="output folder (default tdct-reproduce)")
     r.add_argument(
@@ -290,7 +295,7 @@ def _parser() -> argparse.ArgumentParser:
         help="tendon tensions in N, tendon 1 first; repeat for more experiments",
     )
     y.add_argument(
-        "--insertion-mm", type=_finite, default=0.0, help="tube insertion depth in mm for every experiment (default 0)"
+        "--insertion-mm", type=_finite, default=0.0, help="insertion depth in mm of every tube, every experiment (default 0)"
     )
     y.add_argument("--tip-mass-g", type=_finite, default=0.0, help="tip mass in grams for every experiment (default 0)")
     y.add_argument("--noise-mm", type=_finite, default=0.1, help="Gaussian noise per coordinate in mm (default 0.1)")
@@ -324,7 +329,11 @@ def _parser() -> argparse.ArgumentParser:
         help="among redundant solutions (more free inputs than target components), the stiffest or least tension",
     )
     i.add_argument(
-        "--max-steps", type=int, default=IK_MAX_STEPS, help=f"most IK steps, both phases together (default {IK_MAX_STEPS})"
+        "--max-steps",
+        type=int,
+        default=IK_MAX_STEPS,
+        help=f"most IK steps from each start (up to {IK_STARTS} starts are tried while the target is missed) and, with "
+        f"--objective, most steps of the optimisation (default {IK_MAX_STEPS}); the steps printed count them all",
     )
     i.add_argument(
         "--direction", type=_floats(3), metavar="DX,DY,DZ", help="world direction for --objective stiffness (default: along -y)"
@@ -349,7 +358,11 @@ def _parser() -> argparse.ArgumentParser:
         "pretension and tendon stiffness, every tendon angle and the registration; names: docs/recordings.md)",
     )
     k.add_argument("--every", type=int, default=1, help="with --dataset: fit every Nth training sample (default 1: all)")
-    k.add_argument("--out", metavar="DIR", help="with --dataset: write fitted.toml, report.json and prediction.png into DIR")
+    k.add_argument(
+        "--out",
+        metavar="DIR",
+        help="with --dataset: write fitted.toml, report.json and prediction.png into the folder DIR (made if missing)",
+    )
     k.add_argument("--max-steps", type=int, default=30, help="most Levenberg-Marquardt steps (default 30)")
     k.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     k.add_argument("--plot", metavar="fit.png", help="save model over measured shapes (side view and 3D)")
@@ -477,9 +490,10 @@ def _check_displacements(pulled, robot: Robot) -> None:
             )
 
 
-def _conditions(args, act) -> str:
-    """The inputs as typed, for figure titles."""
-    parts = [f"tensions {', '.join(f'{t:g}' for t in np.asarray(act.tensions))} N"] if np.size(act.tensions) else []
+def _conditions(args, tensions) -> str:
+    """The inputs as typed, for figure titles, with the ``tensions`` [N] as solved (those of the
+    displacement-driven tendons are outputs)."""
+    parts = [f"tensions {', '.join(f'{t:.4g}' for t in np.asarray(tensions))} N"] if np.size(tensions) else []
     parts += [f"tendon {i} pulled {d:g} mm" for i, d in args.displacements_mm or ()]
     depths = args.insertions_mm or (() if args.insertion_mm is None else (args.insertion_mm,))
     if depths:
@@ -495,9 +509,23 @@ def _conditions(args, act) -> str:
     return ", ".join(parts) or "no load"
 
 
+def _scene(args, robot: Robot):
+    """The obstacles of --scene (None without), checked against the robot's base."""
+    if not args.scene:
+        return None
+    scene = read_scene(args.scene)
+    try:
+        scene.check_base(float(robot.sections[0].outer_diameter) / 2)
+    except ValueError as e:
+        raise ValueError(f"scene file {args.scene}: {e}") from None
+    return scene
+
+
 def _compliance_command(args) -> int:
     robot, act, load, options = _inputs(args)
-    CM = np.asarray(compliance(robot, act, load, **options))
+    scene = _scene(args, robot)
+    C, sol = compliance_and_solution(robot, act, load, **options, scene=scene)
+    CM = np.asarray(C)[:3, :3]
     e = compliance_ellipsoid(CM)
     mm = dict(
         compliance_mm_per_N=(CM * 1e3).tolist(),
@@ -507,30 +535,29 @@ def _compliance_command(args) -> int:
         axes=np.asarray(e.axes).tolist(),
     )
     if args.json:
-        print(json.dumps(mm))
+        print(json.dumps(mm | ({} if scene is None else _contacts(sol, scene))))
     else:
+        held = "" if scene is None else ", in contact (the touching candidates held on their obstacles)"
         with np.printoptions(precision=4, suppress=True):
-            print(f"compliance matrix CM [mm/N] (world x, y, z):\n{CM * 1e3}")
+            print(f"compliance matrix CM [mm/N] (world x, y, z){held}:\n{CM * 1e3}")
             print(f"eigenvalues lambda_1..3 [mm/N]: {np.asarray(e.eigenvalues) * 1e3}")
             print(f"ellipsoid semi-axes [mm/N]:     {np.asarray(e.semi_axes) * 1e3}")
             print(f"ellipsoid axes (columns):\n{np.asarray(e.axes)}")
+        if scene is not None:
+            _print_contacts(_contacts(sol, scene))
     if args.plot:
         from .plotting import plot_compliance_ellipses
 
-        plot_compliance_ellipses({"tip compliance": CM}, args.plot, title=_conditions(args, act))
+        plot_compliance_ellipses({"tip compliance": CM}, args.plot, title=_conditions(args, sol.tensions))
     return 0
 
 
 def _solve_command(args) -> int:
     robot, act, load, options = _inputs(args)
-    scene = None
-    if args.scene:
-        scene = read_scene(args.scene)
-        try:
-            scene.check_base(float(robot.sections[0].outer_diameter) / 2)
-        except ValueError as e:
-            raise ValueError(f"scene file {args.scene}: {e}") from None
+    scene = _scene(args, robot)
     sol = solve(robot, act, load, **options, scene=scene, throw=False)
+    for note in sol.notes(robot):  # a converged shape that is not physical
+        print(f"tdct: note: {note}", file=sys.stderr)
     tip_mm = np.asarray(sol.tip_position) * 1e3
     angle = float(np.degrees(sol.tip_angle))
     converged, res, iters = bool(sol.converged), float(sol.residual_norm), int(sol.iterations)
@@ -540,7 +567,8 @@ def _solve_command(args) -> int:
         slack=np.asarray(sol.slack).tolist(),
     )
     if args.json:
-        shape = {"s_mm": (np.asarray(sol.s) * 1e3).tolist(), "position_mm": (np.asarray(sol.position) * 1e3).tolist()}
+        i = sol.distinct()
+        shape = {"s_mm": (np.asarray(sol.s)[i] * 1e3).tolist(), "position_mm": (np.asarray(sol.position)[i] * 1e3).tolist()}
         out = dict(
             tip_position_mm=tip_mm.tolist(),
             tip_angle_deg=angle,
@@ -564,12 +592,13 @@ def _solve_command(args) -> int:
         if scene is not None:
             _print_contacts(_contacts(sol, scene))
     if args.csv:
-        table = np.column_stack([np.asarray(sol.s), np.asarray(sol.position)]) * 1e3
+        i = sol.distinct()
+        table = np.column_stack([np.asarray(sol.s)[i], np.asarray(sol.position)[i]]) * 1e3
         np.savetxt(args.csv, table, delimiter=",", header="s_mm,x_mm,y_mm,z_mm", comments="", fmt="%.9g")
     if args.plot:
         from .plotting import plot_robot
 
-        plot_robot(sol, robot, act, load.with_scene(scene), args.plot, title=_conditions(args, act))
+        plot_robot(sol, robot, act, load.with_scene(scene), args.plot, title=_conditions(args, sol.tensions))
     check_solution(sol, options["solver"], True)
     return 0
 
@@ -619,7 +648,7 @@ def _reproduce_command(args) -> int:
     print((Path(args.out) / "summary.md").read_text())
     failed = [r for r in summary["headlines"] if "NOT converged" in r["note"]]
     if failed:
-        print(f"tdct: error: {len(failed)} headline result(s) did not converge (see summary.md)", file=sys.stderr)
+        print(f"tdct: {len(failed)} headline result(s) did not converge (see summary.md)", file=sys.stderr)
         return 1
     return 0
 
@@ -639,6 +668,8 @@ def _synth_command(args) -> int:
     robot = _robot(args)
     solver = _solver(args)
     check_flag("--insertion-mm", args.insertion_mm, 0.0, 1e3 * float(robot.length), " mm")
+    if args.insertion_mm and not robot.n_tubes:
+        raise ValueError(f"--insertion-mm {args.insertion_mm:g}: the robot has no tubes; leave it out")
     check_flag("--tip-mass-g", args.tip_mass_g, 0.0, unit=" g")
     check_flag("--noise-mm", args.noise_mm, 0.0, unit=" mm")
     check_flag("--points", args.points, 2)
@@ -647,7 +678,7 @@ def _synth_command(args) -> int:
     else:
         for t in args.tensions:
             _check_tensions("--tensions", t, robot)
-        acts = [Actuation(t, args.insertion_mm * 1e-3) for t in args.tensions]
+        acts = [Actuation(t, (args.insertion_mm * 1e-3,) * robot.n_tubes) for t in args.tensions]
     experiments = synthesize(
         robot,
         acts,
@@ -713,6 +744,8 @@ def _calibrate_rig_command(args) -> int:
     if args.files:
         raise ValueError("tdct calibrate --dataset takes no shape files")
     check_flag("--every", args.every, 1)
+    if args.out:
+        check_output("--out", args.out, folder=True)
     data = read_dataset(args.dataset)
     robot_file = args.robot or data.robot
     if robot_file is None:
@@ -826,6 +859,7 @@ def _ik_command(args) -> int:
         throw=False,
     )
     code = int(result.result)
+    limited = "each start tried" + (" and the optimisation" if args.objective else "")
     out = dict(
         tensions_N=np.asarray(result.actuation.tensions).tolist(),
         **_depths_mm(result.actuation),
@@ -851,7 +885,8 @@ def _ik_command(args) -> int:
     if args.json:
         print(json.dumps(out))
     else:
-        print(f"status:            {out['status']} after {int(result.iterations)} steps")
+        steps = f"{int(result.iterations)} IK steps in all; --max-steps {args.max_steps} limits the steps from {limited}"
+        print(f"status:            {out['status']} ({steps})")
         print(f"tensions [N]:      {', '.join(f'{t:.4f}' for t in out['tensions_N'])}")
         if "insertion_mm" in out:
             print(f"insertion [mm]:    {out['insertion_mm']:.3f}")
@@ -869,11 +904,20 @@ def _ik_command(args) -> int:
 
         title = f"IK to ({', '.join(f'{x:g}' for x in args.target_mm)}) mm: {out['status']}"
         plot_robot(result.solution, robot, result.actuation, load, args.plot, title=title, target=target.position)
-    if code not in (status.SUCCESS,):
-        advice = status.message(code, cli=True, what="the inverse kinematics", max_steps=args.max_steps)
-        print(f"tdct: error: {advice}", file=sys.stderr)
+    if code == status.SUCCESS:
+        return 0
+    if code == status.UNREACHABLE:  # an answer, not a failure: the nearest pose, printed
+        nearest = "no inputs within the bounds put the tip on the target; the nearest pose found is printed"
+        print(f"tdct: {status.message(code, unreachable=nearest)}", file=sys.stderr)
         return 1
-    return 0
+    if code == status.OUTER_LIMIT:
+        advice = (
+            f"the step limit --max-steps {args.max_steps} (on the steps from {limited}) was reached before the "
+            f"tolerance was met; raise --max-steps (e.g. --max-steps {2 * args.max_steps})"
+        )
+    else:
+        advice = status.message(code, cli=True, what="the inverse kinematics", max_steps=args.max_steps)
+    raise ConvergenceError(f"the inverse kinematics did not converge: {advice}", code)
 
 
 def _sweep_command(args) -> int:
@@ -920,8 +964,9 @@ def main(argv: list[str] | None = None) -> int:
             return COMMANDS[args.verb](args)
     except (ValueError, TypeError, OSError) as e:
         return _fail(e, 2)
-    except ConvergenceError as e:
-        return _fail(e.cli_message, 1)
+    except ConvergenceError as e:  # not a bad input: what did not converge, and what to do
+        print(f"tdct: {e.cli_message}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         again = "; the finished chunks are kept: rerunning the same command resumes from them" if args.verb == "sweep" else ""
         print(f"tdct: interrupted{again}", file=sys.stderr)

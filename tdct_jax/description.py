@@ -28,8 +28,10 @@ from .checks import (
     fmt,
     interval,
     is_concrete,
-    plausibility_note,
     read_toml,
+    relabelled_notes,
+    size_note,
+    warn_implausible,
     warn_user,
 )
 from .tree import pytree, set_fields, static
@@ -91,6 +93,7 @@ class Section:
         check_range("Section.tendon_channel_diameter", self.tendon_channel_diameter, 0.0, unit=" m")
         if is_concrete(self.outer_diameter):
             check_range("Section.inner_diameter", self.inner_diameter, 0.0, float(self.outer_diameter), hi_open=True, unit=" m")
+        warn_implausible("Section", self, "Section.")
 
 
 @pytree
@@ -123,15 +126,10 @@ class Tendon:
         units = dict(offset=" m", angle=" rad", twist=" rad/m", end=" m", max_tension=" N", stiffness=" N")
         _scalars(self, units, optional=("twist", "end", "max_tension", "stiffness"))
         check_range("Tendon.offset", self.offset, 0.0, unit=" m")
-        if is_concrete(self.angle) and abs(float(self.angle)) > 2 * math.pi:
-            warn_user(
-                f"Tendon.angle = {float(self.angle):g} rad is more than a full turn: angles are in radians in Python "
-                f"(did you mean {math.radians(float(self.angle)):.4g} rad, i.e. {float(self.angle):g} deg?)",
-                UnitWarning,
-            )
         for name, unit in (("end", " m"), ("max_tension", " N"), ("stiffness", " N")):
             if getattr(self, name) is not None:
                 check_range(f"Tendon.{name}", getattr(self, name), 0.0, lo_open=True, unit=unit)
+        warn_implausible("Tendon", self, "Tendon.")  # an angle beyond a full turn: degrees given?
 
     def position(self, s):
         """r_t(s) and its derivative r_t'(s), body frame [m] and [1], each (..., 3)."""
@@ -170,6 +168,7 @@ class Tube:
         check_range("Tube.density", self.density, 0.0, unit=" kg/m^3")
         if is_concrete(self.outer_diameter):
             check_range("Tube.inner_diameter", self.inner_diameter, 0.0, float(self.outer_diameter), hi_open=True, unit=" m")
+        warn_implausible("Tube", self, "Tube.")
 
     @property
     def area(self):
@@ -192,6 +191,7 @@ class PointMass:
         _scalars(self, dict(s=" m", mass=" kg"))
         check_range("PointMass.s", self.s, 0.0, unit=" m")
         check_range("PointMass.mass", self.mass, 0.0, unit=" kg")
+        warn_implausible("PointMass", self, "PointMass.")
 
 
 class _PaperByDefault(type):
@@ -228,6 +228,12 @@ class Robot(metaclass=_PaperByDefault):
         calibrated_tension: (lowest, highest) tension [N] the robot was calibrated over (static),
             or None; inputs beyond it get a CalibrationWarning, not an error.
         calibrated_tip_force: (lowest, highest) tip force magnitude [N] likewise (static), or None.
+        merged: set when built, not given (static): where some of the robot's own breakpoints
+            (``own_breakpoints``: a section end, a tendon anchor, a point mass) lie at the same arc
+            length, each one's group by the index of its first member (the length's, for those at
+            the tip); the solver integrates each group as one breakpoint. None where none coincide,
+            or where a breakpoint was traced when the robot was built (``replace`` under ``jit``
+            or ``grad``): each then keeps its own, zero-length, interval.
 
     Raises:
         ValueError: bad values, naming the field (``sections[1].end``), the value and the range.
@@ -240,12 +246,14 @@ class Robot(metaclass=_PaperByDefault):
     masses: tuple = ()
     calibrated_tension: tuple | None = static(default=None)
     calibrated_tip_force: tuple | None = static(default=None)
+    merged: tuple | None = static(default=None, repr=False)
 
     ITEMS: ClassVar[dict] = {}  # the item kinds and their classes, for fields.py (set below)
 
     def __post_init__(self):
         set_fields(self, length=as_array("length", self.length, (), unit=" m"))
         check_range("length", self.length, 0.0, lo_open=True, unit=" m")
+        warn_implausible("Robot", self)
         for name, cls in (("sections", Section), ("tendons", Tendon), ("tubes", Tube), ("masses", PointMass)):
             items = tuple(getattr(self, name))
             for i, item in enumerate(items):
@@ -264,6 +272,7 @@ class Robot(metaclass=_PaperByDefault):
                 set_fields(self, **{name: tuple(float(b) for b in bounds)})
         if is_concrete_tree(self):
             self._check()
+        set_fields(self, merged=coincident(own_breakpoints(self)))
 
     def _check(self):
         L = float(self.length)
@@ -290,6 +299,10 @@ class Robot(metaclass=_PaperByDefault):
                 check_range(f"tubes[{i}].outer_diameter", tube.outer_diameter, 0.0, inner, lo_open=True, unit=where)
         for j, sec in enumerate(self.sections):
             self._check_section(j, sec)
+        sizes = {f"sections[{j}].outer_diameter": sec.outer_diameter for j, sec in enumerate(self.sections)}
+        note = size_note(L, sizes | {f"tendons[{i}].offset": t.offset for i, t in enumerate(self.tendons)})
+        if note:
+            warn_user(note, UnitWarning)
 
     def _check_section(self, j: int, sec: Section) -> None:
         """Tubes fit the channel; tendon channels lie in the body and do not overlap; area > 0."""
@@ -301,6 +314,8 @@ class Robot(metaclass=_PaperByDefault):
         through = [i for i, t in enumerate(self.tendons) if t.end is None or float(t.end) > start]
         if dt > 0:
             lo, hi = (dc + dt) / 2, (D - dt) / 2
+            if through and lo > hi:
+                raise ValueError(_no_room(f"sections[{j}].", dt, D, dc, "inner_diameter"))
             for i in through:
                 where = f" m (tendon channels of sections[{j}] lie between its central channel and its surface)"
                 check_range(f"tendons[{i}].offset", self.tendons[i].offset, lo, hi, unit=where)
@@ -333,25 +348,28 @@ class Robot(metaclass=_PaperByDefault):
     @classmethod
     def from_table(cls, data: dict, path) -> Robot:
         """``from_dict`` of a robot file's table, its errors and unit notes prefixed with the file's path."""
-        with warnings.catch_warnings(record=True) as notes:
-            warnings.simplefilter("always", UnitWarning)
-            try:
-                robot = cls.from_dict(data)
-            except (ValueError, TypeError) as e:
-                raise ValueError(f"robot file {path}: {e}") from e
-        for note in notes:
-            if issubclass(note.category, UnitWarning):
-                warn_user(f"robot file {path}: {note.message}", UnitWarning)
-            else:
-                warnings.warn_explicit(note.message, note.category, note.filename, note.lineno)
-        return robot
+        if not data:
+            raise ValueError(f"robot file {path} is empty: {EMPTY}")
+        try:
+            with relabelled_notes(lambda note: f"robot file {path}: {note}"):
+                return cls.from_dict(data)
+        except (ValueError, TypeError) as e:
+            raise ValueError(f"robot file {path}: {e}") from e
 
     @classmethod
     def from_dict(cls, data: dict) -> Robot:
         """A robot from the parsed robot file (the TOML's tables as dicts); see ``from_toml``."""
         if "sections" not in data:  # the paper robot's values by their Table II names (``Robot.paper``)
             table = data.get("robot", data)
+            if not table:
+                raise ValueError(f"the robot's table is empty: {EMPTY}")
             unknown = sorted(set(table) - set(PAPER))
+            if items := [f"[[{k}]]" for k in unknown if k in cls.ITEMS]:
+                raise ValueError(
+                    f"no [[sections]]: a robot file with {', '.join(items)} describes "
+                    "its body by length and [[sections]] (docs/robot-file.md); only a file of nothing but the paper "
+                    "robot's Table II names (E_silicone, tendon_offset, ...) may leave them out"
+                )
             if unknown:
                 raise ValueError(
                     f"unknown field(s) {unknown}; allowed: the robot file's keys (length, sections, ...) or {sorted(PAPER)}"
@@ -493,22 +511,24 @@ class Robot(metaclass=_PaperByDefault):
             raise TypeError(f"Robot.paper: unknown value(s) {unknown}; allowed: {sorted(PAPER)}")
         v = PAPER | table_ii
         _check_paper(v)
-        section = Section(
-            end=v["length"],
-            outer_diameter=v["outer_diameter"],
-            E=v["E_silicone"],
-            nu=v["nu_silicone"],
-            density=v["density_silicone"],
-            inner_diameter=v["channel_diameter"],
-            tendon_channel_diameter=v["tendon_channel_diameter"],
-        )
         angles = v["tendon_angles"]
         n = int(np.size(angles)) if is_concrete(angles) else int(np.shape(angles)[0])
         if n == 0:
             raise ValueError("tendon_angles must list at least one tendon, got an empty list")
         angles = as_array("tendon_angles", angles, (n,)) if is_concrete(angles) else angles
-        tendons = tuple(Tendon(offset=v["tendon_offset"], angle=angles[i]) for i in range(n))
-        tube = Tube(v["tube_outer_diameter"], v["tube_inner_diameter"], v["E_tube"], v["nu_tube"], v["density_tube"])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UnitWarning)  # _check_paper noted them by their Table II names
+            section = Section(
+                end=v["length"],
+                outer_diameter=v["outer_diameter"],
+                E=v["E_silicone"],
+                nu=v["nu_silicone"],
+                density=v["density_silicone"],
+                inner_diameter=v["channel_diameter"],
+                tendon_channel_diameter=v["tendon_channel_diameter"],
+            )
+            tendons = tuple(Tendon(offset=v["tendon_offset"], angle=angles[i]) for i in range(n))
+            tube = Tube(v["tube_outer_diameter"], v["tube_inner_diameter"], v["E_tube"], v["nu_tube"], v["density_tube"])
         return cls(v["length"], (section,), tendons, (tube,), (), v["calibrated_tension"], v["calibrated_tip_force"])
 
     def __getattr__(self, name):
@@ -527,6 +547,33 @@ class Robot(metaclass=_PaperByDefault):
 SECTION_KEYS = ("end", "outer_diameter", "E", "nu", "density")
 SECTION_OPTIONAL = ("start", "inner_diameter", "tendon_channel_diameter", "friction", "guide_spacing")
 TENDON_OPTIONAL = ("end", "twist_deg_per_m", "max_tension", "stiffness")
+
+
+def own_breakpoints(robot: Robot) -> list:
+    """The robot's own breakpoints in their static order: the base (0), the interior section ends,
+    the anchors not at the tip, the point masses, the length; traced or concrete."""
+    return [
+        0.0,
+        *(sec.end for sec in robot.sections[:-1]),
+        *(t.end for t in robot.tendons if t.end is not None),
+        *(m.s for m in robot.masses),
+        robot.length,
+    ]
+
+
+def coincident(values: list) -> tuple | None:
+    """For breakpoints ``values``, each one's group: the index of the first at the same arc length,
+    the last's (the length) for those equal to it; None if none coincide or any is traced."""
+    if not all(is_concrete(v) for v in values):
+        return None
+    v = [np.asarray(x, dtype=float) for x in values]
+    last = len(v) - 1
+
+    def same(a, b):
+        return a.shape == b.shape and bool(np.all(a == b))
+
+    group = tuple(last if same(x, v[last]) else next(j for j in range(i + 1) if same(v[j], x)) for i, x in enumerate(v))
+    return None if group == tuple(range(len(v))) else group
 
 
 def is_concrete_tree(obj) -> bool:
@@ -592,9 +639,23 @@ def _build(cls, where: str, kw: dict):
     for k, v in kw.items():
         _number(f"{where}.{k}", v)
     try:
-        return cls(**kw)
+        with relabelled_notes(lambda note: note.replace(f"{cls.__name__}.", f"{where}.", 1)):
+            return cls(**kw)
     except ValueError as e:
         raise ValueError(str(e).replace(f"{cls.__name__}.", f"{where}.", 1)) from e
+
+
+def _no_room(prefix: str, dt: float, D: float, dc: float, channel: str) -> str:
+    """The message for a tendon channel diameter that leaves no room between the central channel and the surface."""
+    return (
+        f"{prefix}tendon_channel_diameter = {dt:g} m leaves no room for a tendon channel between the central channel "
+        f"({channel} {dc:g} m) and the surface (outer_diameter {D:g} m): it must be at most "
+        f"({prefix}outer_diameter - {prefix}{channel}) / 2 = {(D - dc) / 2:g} m"
+    )
+
+
+EMPTY = "describe the robot by length and [[sections]] (docs/robot-file.md), or give the paper robot's Table II names"
+"""What an empty robot file or table is told."""
 
 
 def _check_paper(v: dict) -> None:
@@ -609,10 +670,7 @@ def _check_paper(v: dict) -> None:
         check_range(name, v[name], 0.0, unit=units.get(name, " m"))
     for name in ("nu_silicone", "nu_tube"):
         check_range(name, v[name], *NU_RANGE, lo_open=True)
-    for name in PAPER:
-        note = plausibility_note(name, v[name])
-        if note:
-            warn_user(note, UnitWarning)
+    warn_implausible("paper", v)
     if not all(is_concrete(v[n]) for n in ("outer_diameter", "channel_diameter", "tube_outer_diameter", "tendon_offset")):
         return
     check_range("channel_diameter", v["channel_diameter"], 0.0, float(v["outer_diameter"]), hi_open=True, unit=" m")
@@ -622,6 +680,8 @@ def _check_paper(v: dict) -> None:
     rim = (float(v["outer_diameter"]) - dt) / 2
     if dt > 0:
         core = (float(v["channel_diameter"]) + dt) / 2
+        if core > rim:
+            raise ValueError(_no_room("", dt, float(v["outer_diameter"]), float(v["channel_diameter"]), "channel_diameter"))
         where = " m (tendon channels between the central channel and the surface)"
         check_range("tendon_offset", v["tendon_offset"], core, rim, unit=where)
     else:

@@ -21,7 +21,7 @@ import math
 import re
 from collections.abc import Mapping
 
-from .checks import deprecated
+from .checks import deprecated, relabelled_notes
 
 PAPER_NAMES = {
     "outer_diameter": "sections[*].outer_diameter",
@@ -139,17 +139,20 @@ def replace(robot, values: Mapping[str, object]):
     if not values:
         return robot
     top, groups = {}, {kind: list(getattr(robot, kind)) for kind in robot.ITEMS}
-    for name, v in values.items():
-        where = _parse(robot, name)
-        if where is None:
-            top[name] = v
-            continue
-        kind, index, field = where
-        for i in index:
-            try:
-                groups[kind][i] = dataclasses.replace(groups[kind][i], **{field: v})
-            except ValueError as e:
-                raise ValueError(str(e).replace(f"{robot.ITEMS[kind].__name__}.", f"{kind}[{i}].", 1)) from e
+    with relabelled_notes():  # those of tendons[*] as one
+        for name, v in values.items():
+            where = _parse(robot, name)
+            if where is None:
+                top[name] = v
+                continue
+            kind, index, field = where
+            for i in index:
+                old, new = f"{robot.ITEMS[kind].__name__}.", f"{kind}[{i}]."
+                try:
+                    with relabelled_notes(lambda note, old=old, new=new: note.replace(old, new, 1)):
+                        groups[kind][i] = dataclasses.replace(groups[kind][i], **{field: v})
+                except ValueError as e:
+                    raise ValueError(str(e).replace(old, new, 1)) from e
     changed = {
         kind: tuple(items)
         for kind, items in groups.items()

@@ -206,7 +206,7 @@ def fit_load_capacities(
 
 def calibration_conditions(robot: Robot, tensions=CALIBRATION_TENSIONS) -> list[Actuation]:
     """Sec. III.B's calibration protocol: tendon 1 alone at five tensions, no tube, no tip load."""
-    return [Actuation(t, 0.0) for t in tendon1(robot, tensions)]
+    return [Actuation(t, (0.0,) * robot.n_tubes) for t in tendon1(robot, tensions)]
 
 
 # ----------------------------------------------------------------------------- Secs. V.A and V.B as inverse kinematics

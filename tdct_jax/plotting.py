@@ -776,13 +776,16 @@ def plot_prediction(prediction, calibration=None, path: str | Path | None = None
     measured tip path (dots) and the model's (line) seen along the measurement frame's z (x-y, mm);
     below, the error along the sequence (mean offset removed), and with ``calibration`` the tip
     RMSE after each fit step. ``bound``: the RMSE no model without memory goes below [m] (half the
-    distance between samples with equal servo values), drawn as a line."""
+    distance between samples with equal servo values), drawn as a line. Samples that did not solve
+    (``codes``) are gaps."""
     plt = _pyplot()
     families = list(prediction.per_pattern)
     fig = plt.figure(figsize=(4.2 * max(len(families), 2), 8.2))
     grid = fig.add_gridspec(2, max(len(families), 2) * 2)
     fam = prediction.families
-    tips, measured = 1e3 * (prediction.tips + prediction.errors["offset"]), 1e3 * prediction.measured
+    solved = (np.asarray(prediction.codes) == 0)[:, None]
+    tips = 1e3 * np.where(solved, prediction.tips + prediction.errors["offset"], np.nan)
+    measured = 1e3 * prediction.measured
     for k, f in enumerate(families):
         ax = fig.add_subplot(grid[0, 2 * k : 2 * k + 2])
         pats = list(dict.fromkeys(prediction.patterns[fam == f]))

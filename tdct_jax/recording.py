@@ -20,7 +20,7 @@ in m, mm or um, tensions in N, time in s. A ``Recording`` holds SI units (m, N, 
 
 A data set is a small TOML description next to its CSV files (paths relative to it)::
 
-    robot = "robot.toml"           # the robot file (optional; resolved, not opened)
+    robot = "robot.toml"           # the robot file (optional; read for its length only)
     train = "train.csv"            # required
     validation = "val.csv"         # optional; must have the same columns as train
     label = "pattern_label"        # optional
@@ -34,7 +34,9 @@ A data set is a small TOML description next to its CSV files (paths relative to 
     tip_x = "mm"
 
 Every error is a ValueError whose message starts with ``path:line:`` (``path:`` for the whole
-file) and names the column, the value and what is allowed.
+file) and names the column, the value and what is allowed. Where the data set names a robot file,
+tips that lie on average nearer the base than ``checks.TARGET_REACH`` robot lengths in a recording
+in mm (metres labelled mm), or farther in one in m, get a UnitWarning.
 """
 
 from __future__ import annotations
@@ -46,13 +48,15 @@ import io
 import math
 import os
 import re
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
-from .checks import read_toml
+from .checks import UnitWarning, reach_note, read_toml, warn_user
 from .data import _error, _number, _read_text
+from .description import Robot
 
 UNITS = {"m": 1.0, "mm": 1e3, "um": 1e6, "N": 1.0, "s": 1.0, "deg": 180 / math.pi, "rad": 1.0}
 """Each unit a column may state, and how many of it make one SI unit (m, N, s, rad): a value in mm
@@ -138,7 +142,8 @@ class Dataset:
         pulls: a recording of single-tendon pulls (each tendon pulled alone, the others let go),
             with the same columns, or None: the geometry step of a rig calibration
             (``calibrate_rig.identify_geometry``).
-        robot: the robot file the description names, relative to it resolved (not opened), or None.
+        robot: the robot file the description names, relative to it, resolved (``read_dataset`` reads
+            only its length), or None.
         description: the TOML description.
         roles: ``read_recording``'s keyword arguments from the description (``read`` uses them).
     """
@@ -243,7 +248,7 @@ def read_dataset(path: str | os.PathLike) -> Dataset:
         _check_same_columns((train_path, train), (other_path, other), key)
         return read
 
-    return Dataset(
+    dataset = Dataset(
         train=train_recording,
         validation=beside_train("validation"),
         robot=folder / spec["robot"] if "robot" in spec else None,
@@ -251,6 +256,32 @@ def read_dataset(path: str | os.PathLike) -> Dataset:
         roles=roles,
         pulls=beside_train("pulls"),
     )
+    _check_tips(dataset)
+    return dataset
+
+
+def _check_tips(dataset: Dataset) -> None:
+    """A UnitWarning (``checks.reach_note``) for each recording whose tips lie, on average, too near
+    the base or too far from it for the robot's length, where the robot file can be read."""
+    if dataset.robot is None:
+        return
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # its own notes come where it is used
+            length = float(Robot.from_toml(dataset.robot).length)
+    except ValueError:
+        return
+    for rec in (dataset.train, dataset.validation, dataset.pulls):
+        if rec is None or rec.tip is None:
+            continue
+        tip = [(name, unit) for role, name, unit in rec.columns if role == "tip"]
+        units = {unit for _, unit in tip}
+        if units in ({"m"}, {"mm"}):
+            unit = units.pop()
+            name = f"{rec.path}: the tips ({', '.join(n for n, _ in tip)} in {unit}) on average"
+            note = reach_note(name, np.linalg.norm(rec.tip, axis=-1), length, typed_in_mm=unit == "mm", mean=True)
+            if note:
+                warn_user(note, UnitWarning)
 
 
 def check_tendons(rec: Recording, n_tendons: int) -> None:

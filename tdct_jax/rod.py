@@ -7,7 +7,9 @@ Along s the segment parameters change only at breakpoints:
     {0, L} + interior section ends + tube depths + tendon anchors + point-mass and point-load
     locations
 
-Their number is static, their values traced (differentiable); they are sorted at run time. Each
+Their number is static, their values traced (differentiable); they are sorted at run time. The
+robot's own ones that coincide when it is built (an anchor at a section end, a mass on it) count
+once (``Robot.merged``). Each
 interval [b_k, b_k+1] gets ``solver.steps`` RK4 steps (a zero-length interval returns its state)
 and one set of segment parameters, those at its midpoint: section stiffness K_se, K_bt (plus the
 tubes inside), linear density, backbone flag (some tube inside: no shear, eq. 16), and each
@@ -40,7 +42,7 @@ from jax import lax
 
 from . import contact
 from .checks import check_range, is_concrete
-from .description import Robot, channelled_second_moments, is_concrete_tree, section_area
+from .description import Robot, channelled_second_moments, is_concrete_tree, own_breakpoints, section_area
 from .inputs import Actuation, Loads
 from .integrate import coupled, rk4
 from .segments import (
@@ -176,42 +178,51 @@ class Ranks(NamedTuple):
     anchors: jax.Array
 
 
-def _point_loads(robot: Robot, load: Loads, gravity):
-    """Arc lengths (k,) and world force (k, 3) and moment (k, 3) of the point loads and masses."""
-    s = [jnp.asarray(load.point_s, float)]
-    F = [jnp.reshape(jnp.asarray(load.point_force, float), (-1, 3))]
-    C = [jnp.reshape(jnp.asarray(load.point_moment, float), (-1, 3))]
-    if robot.masses:
-        mass = jnp.stack([m.mass for m in robot.masses])
-        s.append(jnp.stack([m.s for m in robot.masses]))
-        F.append(mass[:, None] * gravity[None])
-        C.append(jnp.zeros((len(robot.masses), 3)))
-    return jnp.concatenate(s), jnp.concatenate(F), jnp.concatenate(C)
+def _groups(robot: Robot) -> tuple:
+    """Each of ``own_breakpoints`` by the index of its group's first member (``Robot.merged``)."""
+    return robot.merged or tuple(range(len(own_breakpoints(robot))))
 
 
 def plan(robot: Robot, act: Actuation, load: Loads, gravity) -> Plan:
     """Breakpoints, sorted, with each interval's parameters and each breakpoint's jump.
 
-    The unsorted breakpoints are, in this order: the base, the interior section ends, the tube
-    depths, the anchors not at the tip, the point loads and masses, and L; ties keep this order.
+    The robot's own breakpoints (``own_breakpoints``) come one per group of coincident ones
+    (``Robot.merged``): at the group's first member, moved by the mean of its members' tangents,
+    its jump their sum. The unsorted breakpoints are, in this order: the base, the groups led by
+    interior section ends, the tube depths, those led by anchors, the point loads, those led by
+    point masses, and L; ties keep this order.
     """
-    L = jnp.asarray(robot.length, float)
-    s_p, F_p, C_p = _point_loads(robot, load, gravity)
-    anchored = [i for i, t in enumerate(robot.tendons) if t.end is not None]
-    parts = [
-        jnp.zeros(1),
-        _section_ends(robot),
-        jnp.asarray(act.insertions, float).reshape(-1),
-        jnp.stack([robot.tendons[i].end for i in anchored]) if anchored else jnp.zeros(0),
-        s_p,
-        L[None],
-    ]
+    own = own_breakpoints(robot)
+    group = _groups(robot)
+    n_s, n_a = len(robot.sections) - 1, sum(t.end is not None for t in robot.tendons)
+    kind = np.repeat(np.arange(5), [1, n_s, n_a, len(robot.masses), 1])  # base, section end, anchor, mass, L
+    F_own = jnp.zeros((len(own), 3))
+    if robot.masses:
+        mass = jnp.stack([m.mass for m in robot.masses])
+        F_own = F_own.at[1 + n_s + n_a : -1].set(mass[:, None] * gravity[None])
+    leads = np.unique(group)
+    members = np.asarray(group)[None, :] == leads[:, None]  # (groups, own)
+    v = jnp.stack([jnp.asarray(x, float) for x in own])
+    shift = (jnp.asarray(members, float) @ (v - lax.stop_gradient(v))) / members.sum(axis=1)
+    b_own, F_lead = lax.stop_gradient(v)[leads] + shift, jnp.asarray(members, float) @ F_own
+    by = [leads[kind[leads] == k] for k in range(5)]
+    s_p = jnp.asarray(load.point_s, float).reshape(-1)
+    F_p = jnp.reshape(jnp.asarray(load.point_force, float), (-1, 3))
+    C_p = jnp.reshape(jnp.asarray(load.point_moment, float), (-1, 3))
+    at = {int(i): k for k, i in enumerate(leads)}
+    insertions = jnp.asarray(act.insertions, float).reshape(-1)
+    led = [b_own[np.array([at[int(i)] for i in by[k]], dtype=int)] for k in range(5)]
+    parts = [led[0], led[1], insertions, led[2], s_p, led[3], led[4]]
+    sizes = [p.size for p in parts]
+    first = np.cumsum([0, *sizes])
+    position = {}  # a lead's index in the unsorted breakpoints
+    for k, block in ((0, 0), (1, 1), (2, 3), (3, 5), (4, 6)):
+        position |= {int(i): first[block] + j for j, i in enumerate(by[k])}
+    lead_rows = np.array([position[int(i)] for i in leads], dtype=int)
     b_all = jnp.concatenate(parts)
-    first = np.cumsum([0] + [p.size for p in parts])
-    zeros = jnp.zeros((first[4], 3))
-    dN_all = jnp.concatenate([zeros, -F_p, jnp.zeros((1, 3))])
-    dM_all = jnp.concatenate([zeros, -C_p, jnp.zeros((1, 3))])
     n = b_all.size
+    dN_all = jnp.zeros((n, 3)).at[lead_rows].set(-F_lead).at[first[4] : first[5]].set(-F_p)
+    dM_all = jnp.zeros((n, 3)).at[first[4] : first[5]].set(-C_p)
     if n <= 3:
         # one breakpoint between base and tip (0 <= it <= L): the order is known, and the
         # intervals' parameters do not depend on where it lies, so a batch of insertions shares
@@ -220,10 +231,12 @@ def plan(robot: Robot, act: Actuation, load: Loads, gravity) -> Plan:
     else:
         order = jnp.argsort(b_all, stable=True)
         rank = jnp.argsort(order, stable=True)
+    own_rank = rank[np.array([position[g] for g in group], dtype=int)]
+    anchored = [i for i, t in enumerate(robot.tendons) if t.end is not None]
     anchor_rank = jnp.full(robot.n_tendons, n, rank.dtype)
     if anchored:
-        anchor_rank = anchor_rank.at[np.asarray(anchored)].set(rank[first[3] : first[4]])
-    ranks = Ranks(rank[first[1] : first[2]], rank[first[2] : first[3]], anchor_rank)
+        anchor_rank = anchor_rank.at[np.asarray(anchored)].set(own_rank[1 + n_s : 1 + n_s + n_a])
+    ranks = Ranks(own_rank[1 : 1 + n_s], rank[first[2] : first[3]], anchor_rank)
     b = b_all[order]
     k = jnp.arange(n - 1)
     mid = (b[:-1] + b[1:]) / 2
@@ -361,10 +374,9 @@ class Pieces(NamedTuple):
 
 
 def n_intervals(robot: Robot, load: Loads) -> int:
-    """The number of breakpoint intervals of ``plan`` (static): one more than the interior
-    section ends, tubes, anchors not at the tip, point loads and point masses."""
-    anchored = sum(t.end is not None for t in robot.tendons)
-    return len(robot.sections) + robot.n_tubes + anchored + load.n_points + len(robot.masses)
+    """The number of breakpoint intervals of ``plan`` (static): one fewer than the robot's own
+    breakpoints, coincident ones counted once (``Robot.merged``), plus the tubes and point loads."""
+    return len(set(_groups(robot))) - 1 + robot.n_tubes + load.n_points
 
 
 def n_contact_unknowns(robot: Robot, load: Loads, steps: int) -> int:

@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .checks import as_array, check_integer, check_range, fmt, is_concrete, read_toml
+from .checks import UnitWarning, as_array, check_integer, check_range, fmt, is_concrete, reach_note, read_toml, warn_user
 from .tree import pytree, set_fields, static
 
 
@@ -191,7 +191,7 @@ class Scene:
             raise ValueError("obstacles = (): a scene needs at least one obstacle")
         for i, o in enumerate(obstacles):
             if not isinstance(o, (Plane, Sphere, Capsule, Distance)):
-                raise ValueError(f"obstacles[{i}] = {o!r}: a tdct.Plane, Sphere, Capsule or Distance expected")
+                raise TypeError(f"Scene obstacles[{i}] must be a tdct.Plane, Sphere, Capsule or Distance, got {type(o).__name__}")
             if isinstance(o, Distance):
                 _check_function(o, i)
         set_fields(self, obstacles=obstacles, every=check_integer("every", self.every))
@@ -228,6 +228,20 @@ class Scene:
                     f"{_name(o, i)}: the robot's base (the origin, body radius {base_radius:g} m) is inside it or "
                     f"touching it (distance {d[i]:g} m); move the obstacle at least {base_radius:g} m from the origin"
                 )
+
+    def check_reach(self, length: float) -> None:
+        """A UnitWarning (``checks.reach_note``) for each obstacle whose centre (a sphere's), axis (a
+        capsule's) or surface (a plane's, a ``Distance``'s) lies more than ``TARGET_REACH`` robot
+        lengths (``length`` [m]) from the base, as if typed in millimetres; traced obstacles get none."""
+        if not all(is_concrete(x) for x in jax.tree.leaves(self)):
+            return
+        with jax.ensure_compile_time_eval():
+            d = np.abs(np.asarray(self.distances(jnp.zeros(3))))
+        for i, o in enumerate(self.obstacles):
+            where = {Sphere: "center", Capsule: "axis"}.get(type(o), "surface")
+            note = reach_note(f"{_name(o, i)} {where}", d[i] + float(getattr(o, "radius", 0.0)), length)
+            if note:
+                warn_user(note, UnitWarning)
 
     def to_dict(self) -> dict:
         """The scene file's table (``read_scene``); ``Distance`` obstacles have no file form."""

@@ -26,9 +26,10 @@ class Solution:
     """Static shape of the robot at the RK4 nodes.
 
     Nodes come interval by interval (rod.py: the intervals between section ends, tube
-    depths, tendon anchors and point loads), ``steps + 1`` each: both sides of every breakpoint
-    appear, ``total_force`` and ``total_moment`` jumping at point loads. The paper's robot has
-    two intervals, [0, d] and [d, L].
+    depths, tendon anchors and point loads, coincident ones of the robot's own counted once),
+    ``steps + 1`` each: both sides of every breakpoint appear, ``total_force`` and
+    ``total_moment`` jumping at point loads. The paper's robot has two intervals, [0, d] and
+    [d, L]. ``distinct()`` picks one node per arc length.
 
     Attributes:
         s: arc length of the undeformed robot [m], (n,).
@@ -104,6 +105,43 @@ class Solution:
     def tip_angle(self):
         """theta_tip: the tip tangent's angle in the z-y plane from +z, toward +y [rad]."""
         return tip_angle(self.tip_rotation)
+
+    def fold(self, robot: Robot) -> tuple[float, float, int]:
+        """Where one solution's tendon paths bend sharpest: (|u_xy| r_t, s [m], tendon index from 0),
+        |u_xy| the bending curvature [1/m] at a node and r_t the offset [m] of a tendon present
+        there, at their largest product; (0.0, 0.0, -1) without tendons. Concrete values only.
+
+        At 1 or more the bend's radius 1/|u_xy| is at most the tendon's offset: on the inside of
+        the bend the tendon's path (and the body at that radius) folds back on itself, and the
+        shape, converged or not, is not physical (``notes`` says so).
+        """
+        s, u = np.asarray(self.s), np.asarray(self.curvature)
+        if not robot.tendons:
+            return 0.0, 0.0, -1
+        bend = np.linalg.norm(u[:, :2], axis=-1)
+        step = np.append(s[0], (s[1:] + s[:-1]) / 2)  # the middle of the step ending at each node
+        reach = np.array([np.inf if t.end is None else float(t.end) for t in robot.tendons])
+        product = bend[:, None] * np.array([float(t.offset) for t in robot.tendons]) * (step[:, None] < reach)
+        node, tendon = np.unravel_index(np.argmax(product), product.shape)
+        return float(product[node, tendon]), float(s[node]), int(tendon)
+
+    def notes(self, robot: Robot) -> list[str]:
+        """Notes on a converged solution (``converged``) whose shape is not physical: a tendon path
+        that folds (``fold`` at 1 or more). The command line prints them as ``tdct: note:`` lines."""
+        value, s, i = self.fold(robot)
+        if not bool(self.converged) or value < 1:
+            return []
+        return [
+            f"tendon {i + 1}'s path folds at s = {1e3 * s:.1f} mm: curvature x offset = {value:.3g}, at least 1 (the bend's "
+            "radius is below the tendon's offset): the shape solves the equations but is not physical; lower the tension or load"
+        ]
+
+    def distinct(self) -> np.ndarray:
+        """Indices of one solution's nodes at distinct arc lengths, in order (the shape files'
+        rows): of the nodes at one arc length (both sides of a breakpoint, a zero-length
+        interval's, e.g. the tube's at insertion 0), the last, after every jump there."""
+        s = np.asarray(self.s)
+        return np.flatnonzero(np.append(s[1:] != s[:-1], True))
 
 
 @jax.jit
@@ -240,7 +278,7 @@ def problem(robot, act, load, solver, scene=None, *, batch: bool = False) -> tup
 
 def with_scene(robot: Robot, load: Loads, scene, solver) -> Loads:
     """``load`` with ``scene`` in it, after its checks: a Scene, the base outside every obstacle,
-    single shooting."""
+    single shooting; obstacles far beyond the robot get a UnitWarning (``Scene.check_reach``)."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a tdct.Scene, got {type(scene).__name__}")
     if solver.intervals > 1:
@@ -249,6 +287,8 @@ def with_scene(robot: Robot, load: Loads, scene, solver) -> Loads:
         )
     if is_concrete(robot.sections[0].outer_diameter):
         scene.check_base(float(robot.sections[0].outer_diameter) / 2)
+    if is_concrete(robot.length):
+        scene.check_reach(float(robot.length))
     return load.with_scene(scene)
 
 

@@ -23,7 +23,9 @@ def test_json_output_matches_the_api(capsys, paper_case):
     np.testing.assert_allclose(out["tip_position_mm"], np.asarray(sol.tip_position) * 1e3, rtol=1e-12)
     np.testing.assert_allclose(out["tip_angle_deg"], np.degrees(float(sol.tip_angle)), rtol=1e-12)
     assert out["converged"] is True and out["iterations"] == int(sol.iterations)
-    assert len(out["shape"]["s_mm"]) == len(out["shape"]["position_mm"]) == len(sol.s)
+    # one row per arc length: the two intervals' 2 x 21 nodes less the node repeated at the insertion
+    assert len(out["shape"]["s_mm"]) == len(out["shape"]["position_mm"]) == 2 * (tdct.SolverOptions().steps + 1) - 1
+    np.testing.assert_allclose(out["shape"]["position_mm"][-1], np.asarray(sol.tip_position) * 1e3, rtol=1e-12)
 
 
 def test_human_output_csv_and_plot(tmp_path, capsys):
@@ -167,7 +169,7 @@ def test_negative_values_are_read_as_typed(capsys, robot):
 def test_unwritable_outputs_exit_2_before_any_computation(argv, where, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     computed = []
-    for name in ("solve", "compliance", "calibrate", "synthesize", "reproduce", "sweep"):
+    for name in ("solve", "compliance_and_solution", "calibrate", "synthesize", "reproduce", "sweep"):
         for module in ("tdct_jax.cli", "tdct_jax.calibrate", "tdct_jax.reproduce", "tdct_jax.sweep"):
             if hasattr(importlib.import_module(module), name):
                 monkeypatch.setattr(importlib.import_module(module), name, lambda *a, name=name, **k: computed.append(name))

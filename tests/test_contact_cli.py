@@ -91,16 +91,17 @@ def test_text_output_and_plot_show_the_contacts(tmp_path, capsys):
         ("every = 0\n[[obstacles]]\nkind = 'plane'\npoint = [0, -0.05, 0]\nnormal = [0, 1, 0]\n", "every"),
     ],
 )
-def test_bad_scene_file_exits_2_naming_the_obstacle_and_field(scene, words, tmp_path, capsys, monkeypatch):
+@pytest.mark.parametrize(("verb", "solver"), [("solve", "solve"), ("compliance", "compliance_and_solution")])
+def test_bad_scene_file_exits_2_naming_the_obstacle_and_field(verb, solver, scene, words, tmp_path, capsys, monkeypatch):
     def no_solve(*args, **kwargs):
         raise AssertionError("a solve started")
 
-    monkeypatch.setattr(cli, "solve", no_solve)
+    monkeypatch.setattr(cli, solver, no_solve)
     path = tmp_path / "scene.toml"
     path.write_text(scene)
-    assert main(["solve", "--scene", str(path)]) == 2
+    assert main([verb, "--scene", str(path)]) == 2
     err = capsys.readouterr().err
-    assert words in err and str(path) in err and "Traceback" not in err
+    assert err.startswith("tdct: error: ") and words in err and str(path) in err and "Traceback" not in err
 
 
 def test_plot_draws_planes_spheres_capsules_and_contact_forces():

@@ -9,7 +9,7 @@ from ..tree import pytree, static
 TOL = 1e-10
 """Default tolerance on the scaled task residual: position error / L (and orientation error [rad])."""
 MAX_STEPS = 60
-"""Default limit on IK steps (both phases together)."""
+"""Default limit on IK steps: from each start of phase 1, and in phase 2."""
 METHODS = ("augmented", "nested")
 
 
@@ -28,7 +28,8 @@ class IKOptions:
             about half the cost).
         tol: tolerance on the scaled task residual (position error / L; orientation error [rad]),
             > 0.
-        max_steps: most IK steps, both phases together, an integer >= 1.
+        max_steps: most IK steps from each start of phase 1 (the given start, then fresh ones
+            while the target is missed), and most steps of phase 2; an integer >= 1.
     """
 
     method: str | None = static(default=None)

@@ -136,7 +136,8 @@ class IKResult:
         position_error: distance from the tip to the target position (over ``target.axes``) [m].
         orientation_error: angle between tip and target orientation [rad] (0 without one).
         objective: the objective's value there (NaN without one).
-        iterations: IK steps taken.
+        iterations: IK steps taken in all: phase 1's from every start tried and phase 2's (each
+            start and phase 2 limited to ``IKOptions.max_steps``).
         chord_steps: how many of them were chord steps: a warm update's (``track``), each one
             evaluation of the model with no Jacobian pass, about a quarter of a full step's cost.
         result: a ``tdct_jax.status`` code: SUCCESS (reached), UNREACHABLE (the nearest pose
