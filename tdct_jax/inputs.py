@@ -80,6 +80,11 @@ class Actuation(metaclass=_Insertion):
         if len(set(driven)) != len(driven) or any(i < 0 for i in driven):
             raise ValueError(f"driven = {self.driven!r}: distinct tendon indices (0 for tendon 1) expected")
         k = len(driven)
+        if is_concrete(self.displacements) and np.ndim(self.displacements) <= 1 and np.size(self.displacements) != k:
+            raise ValueError(
+                f"displacements = {self.displacements!r}: one per driven tendon, and driven = {driven} names {k}; "
+                "driven= lists the tendons they drive (0 for tendon 1)"
+            )
         displacements = as_array(
             "displacements", self.displacements, (k,) if is_concrete(self.displacements) else None, unit=" m"
         )

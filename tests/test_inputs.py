@@ -245,3 +245,10 @@ def test_gather_says_a_file_is_not_a_sweep(tmp_path):
         tdct.gather(tmp_path / "shape.csv")
     with pytest.raises(ValueError, match=r"other.npz: not a tdct sweep result .* lacks the arrays \['result', 'shape'"):
         tdct.gather(tmp_path / "other.npz")
+
+
+@pytest.mark.parametrize(("kw", "n"), [({"displacements": [1e-3]}, 0), ({"displacements": [1e-3, 2e-3], "driven": (0,)}, 1)])
+def test_displacements_name_driven(kw, n):
+    """Displacements without (enough) driven tendons: the message names driven= (issue 48)."""
+    with pytest.raises(ValueError, match=rf"one per driven tendon, and driven = .* names {n}; driven= lists the tendons"):
+        tdct.Actuation(tensions=[0.0] * 4, **kw)
