@@ -189,6 +189,7 @@ KINDS = {
         tendon_channel_diameter="diameter",
         friction=None,
         guide_spacing="spacing",
+        damping=None,  # a retardation time: no unit a length or modulus could be mistaken for
     ),
     "Tendon": dict(
         offset="tendon offset", angle="angle", twist="twist", end=None, max_tension="tension", stiffness="axial stiffness"

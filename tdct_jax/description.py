@@ -67,6 +67,9 @@ class Section:
             and the solver skips the friction terms unless some section has a coefficient.
         guide_spacing: arc length between the guides [m]: spacer disks; 0 (default): a continuous
             channel, a guide at every RK4 node.
+        damping: Kelvin-Voigt retardation time [s] of the section's material (with its tubes):
+            the viscous stresses are ``damping`` times the elastic ones of the strain rates
+            (dynamics.py); 0 (default): elastic. Statics do not see it.
     """
 
     end: float
@@ -78,13 +81,16 @@ class Section:
     tendon_channel_diameter: float = 0.0
     friction: float | None = None
     guide_spacing: float = 0.0
+    damping: float = 0.0
 
     def __post_init__(self):
         units = dict(end=" m", outer_diameter=" m", E=" Pa", nu="", density=" kg/m^3", inner_diameter=" m")
-        _scalars(self, units | dict(tendon_channel_diameter=" m", friction="", guide_spacing=" m"), optional=("friction",))
+        optional = dict(tendon_channel_diameter=" m", friction="", guide_spacing=" m", damping=" s")
+        _scalars(self, units | optional, optional=("friction",))
         if self.friction is not None:
             check_range("Section.friction", self.friction, 0.0)
         check_range("Section.guide_spacing", self.guide_spacing, 0.0, unit=" m")
+        check_range("Section.damping", self.damping, 0.0, unit=" s")
         check_range("Section.end", self.end, 0.0, lo_open=True, unit=" m")
         check_range("Section.outer_diameter", self.outer_diameter, 0.0, lo_open=True, unit=" m")
         check_range("Section.E", self.E, 0.0, lo_open=True, unit=" Pa")
@@ -545,7 +551,7 @@ class Robot(metaclass=_PaperByDefault):
 
 
 SECTION_KEYS = ("end", "outer_diameter", "E", "nu", "density")
-SECTION_OPTIONAL = ("start", "inner_diameter", "tendon_channel_diameter", "friction", "guide_spacing")
+SECTION_OPTIONAL = ("start", "inner_diameter", "tendon_channel_diameter", "friction", "guide_spacing", "damping")
 TENDON_OPTIONAL = ("end", "twist_deg_per_m", "max_tension", "stiffness")
 
 

@@ -38,7 +38,7 @@ PAPER_NAMES = {
     "density_tube": "tubes[0].density",
 }
 """The paper robot's former field names and the names they stand for now."""
-LINEAR = ("nu", "angle", "twist", "friction", "guide_spacing")
+LINEAR = ("nu", "angle", "twist", "friction", "guide_spacing", "damping")
 """Field names whose values may be zero or negative; every other field is positive."""
 DEGREES = {"angle": "angle_deg", "twist": "twist_deg_per_m"}
 """Fields in rad (rad/m) and the names under which a person types them in degrees (per m)."""

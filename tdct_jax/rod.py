@@ -67,7 +67,9 @@ class Interval(NamedTuple):
     K_se (3,) [N], K_bt (3,) [N m^2], rho [kg/m], backbone (1.0: a tube inside), tau (n_t,) [N]
     (zero beyond each anchor), present (n_t,) (1.0 before each anchor), radius: the body's outer
     radius [m] (contact gaps), mu: the section's tendon friction coefficient (0 without one),
-    spacing: its guide spacing [m] (0: a continuous channel)."""
+    spacing: its guide spacing [m] (0: a continuous channel), rhoJ (3,): the rotational inertia
+    per length [kg m] (density x second moments, body x, y, z), damping: the section's
+    Kelvin-Voigt retardation time [s] (dynamics.py)."""
 
     K_se: jax.Array
     K_bt: jax.Array
@@ -78,6 +80,8 @@ class Interval(NamedTuple):
     radius: jax.Array
     mu: jax.Array
     spacing: jax.Array
+    rhoJ: jax.Array
+    damping: jax.Array
 
 
 class Plan(NamedTuple):
@@ -154,6 +158,7 @@ def interval_parameters(robot: Robot, act: Actuation, k, rank: Ranks, s):
             jnp.stack(
                 [G * A, G * A, sec.E * A, sec.E * I_x, sec.E * I_y, G * (I_x + I_y), sec.density * A, sec.outer_diameter / 2]
                 + [jnp.asarray(mu, float), jnp.asarray(sec.guide_spacing, float)]
+                + [sec.density * I_x, sec.density * I_y, sec.density * (I_x + I_y), jnp.asarray(sec.damping, float)]
             )
         )
     p = jnp.stack(props)[idx]
@@ -161,12 +166,14 @@ def interval_parameters(robot: Robot, act: Actuation, k, rank: Ranks, s):
         inside = rank.tubes > k
         EI = jnp.sum(jnp.where(inside, jnp.stack([t.E * t.second_moment for t in robot.tubes]), 0.0))
         rho_t = jnp.sum(jnp.where(inside, jnp.stack([t.density * t.area for t in robot.tubes]), 0.0))
+        rhoI = jnp.sum(jnp.where(inside, jnp.stack([t.density * t.second_moment for t in robot.tubes]), 0.0))
         backbone = jnp.any(inside).astype(float)
     else:
-        EI = rho_t = backbone = jnp.zeros(())
+        EI = rho_t = rhoI = backbone = jnp.zeros(())
     tau = jnp.where(present, jnp.asarray(act.tensions, float), 0.0)
     K_bt = jnp.stack([p[3] + EI, p[4] + EI, p[5]])
-    return Interval(p[:3], K_bt, p[6] + rho_t, backbone, tau, present.astype(float), p[7], p[8], p[9])
+    rhoJ = p[10:13] + rhoI * jnp.array([1.0, 1.0, 2.0])
+    return Interval(p[:3], K_bt, p[6] + rho_t, backbone, tau, present.astype(float), p[7], p[8], p[9], rhoJ, p[13])
 
 
 class Ranks(NamedTuple):

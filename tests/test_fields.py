@@ -21,7 +21,7 @@ def test_item_fields_by_position_and_shared(two):
     assert float(changed.tendons[4].offset) == 0.012 and float(changed.tendons[3].offset) == 0.010
     assert fields.value(changed, "sections[*].E") == 60e9
     assert fields.value(two, "tendons[1].angle") == pytest.approx(-0.5235987755982988)
-    assert len(fields.names(two)) == 1 + 2 * 9 + 6 * 6
+    assert len(fields.names(two)) == 1 + 2 * 10 + 6 * 6
     assert fields.names(tdct.Robot.paper())[0] == "length" and fields.is_linear("tendons[0].angle")
     assert not fields.is_linear("sections[0].E")
 

@@ -1,0 +1,394 @@
+"""The robot in motion: implicit time stepping of the Cosserat rod of rod plus tendons, each time
+step a boundary-value problem in arc length solved by shooting (Till, Aloi and Rucker, IJRR 2019;
+docs/dynamics.md).
+
+Time derivatives are replaced by the BDF-alpha formula (Till et al., eq. 12): for any variable z
+along the rod,
+
+    z_t(t_i) = c0 z(t_i) + z_h,     z_h = c1 z(t_i-1) + c2 z(t_i-2) + d1 z_t(t_i-1),
+    c0 = (1.5 + a) / (dt (1 + a)),  c1 = -2 / dt,  c2 = (0.5 + a) / (dt (1 + a)),  d1 = a / (1 + a),
+
+a in [-0.5, 0]: a = -0.5 is the trapezoidal rule (second order, no numerical dissipation), a = 0
+BDF2 (second order, damping the fastest modes most). The history z_h is known at each step, so
+the dynamic equations become ODEs in s, integrated by RK4 like the static ones, with the state
+(p, R, N, M) of statics plus the body-frame velocity q and angular velocity w:
+
+    p' = R v,  R' = R u^,
+    N' = -f + rho R (q_t + w x q),                M' = -p' x N + R (rhoJ w_t + w x rhoJ w),
+    q' = v_t - u x q + w x v,                     w' = u_t - u x w,
+
+with N, M the total force and moment of rod plus tendons (massless tendons: their forces stay
+internal, as in statics). The constitutive relations are the static ones with Kelvin-Voigt
+damping (``Section.damping`` = tau_d): the rod's stress is K (v - e3) + tau_d K v_t, which with
+v_t = c0 v + v_h is the static relation with stiffness (1 + c0 tau_d) K and reference strain
+(e3 - tau_d v_h) / (1 + c0 tau_d), so that the static solver of the strains serves unchanged.
+
+The history lives where the vector field is evaluated: at each RK4 stage of each step (4 points
+a step), so the integration in s keeps its fourth order. The unknowns of each time step are the
+static ones, the base's N(0), M(0) (q = w = 0 at the clamped base), found by Newton's method with
+a jacfwd Jacobian (damped where a step does not lower the residual), warm-started from the
+last step, inside ``lax.custom_root``: derivatives of any
+trajectory output with respect to every input pass through each step's implicit solve.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from . import newton, rod, status
+from .checks import as_array, check_range, is_concrete
+from .description import Robot
+from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
+from .options import DEFAULT_SOLVER, SolverOptions
+from .segments import E3, Segment, State, body_strains
+from .so3 import hat, orthonormalize
+from .solve import solve
+from .tree import pytree
+
+ALPHA = -0.2
+"""Default BDF-alpha parameter (Till et al.'s choice): second order, a little high-frequency
+dissipation."""
+
+
+class Scheme(NamedTuple):
+    """BDF-alpha coefficients (module docstring) of one step length."""
+
+    c0: jax.Array
+    c1: jax.Array
+    c2: jax.Array
+    d1: jax.Array
+
+
+def scheme(dt, alpha=ALPHA) -> Scheme:
+    """The BDF-alpha coefficients for step ``dt`` [s] and parameter ``alpha`` in [-0.5, 0]."""
+    return Scheme((1.5 + alpha) / (dt * (1 + alpha)), -2.0 / dt, (0.5 + alpha) / (dt * (1 + alpha)), alpha / (1 + alpha))
+
+
+STATIC = Scheme(0.0, 0.0, 0.0, 0.0)
+"""Every time derivative zero: the dynamic equations reduce to statics."""
+
+
+class Dyn(NamedTuple):
+    """The state along s: the static State y and the body-frame velocity q [m/s] and angular
+    velocity w [rad/s]."""
+
+    y: State
+    q: jax.Array
+    w: jax.Array
+
+
+class Layout(NamedTuple):
+    """One time step's integration plan: per RK4 step (P intervals x ``steps``), its interval's
+    parameters, start s0 [m], length h [m] and the jump (dN, dM) at its start; the jump at L."""
+
+    P: rod.Interval
+    s0: jax.Array
+    h: jax.Array
+    dN: jax.Array
+    dM: jax.Array
+    tip: tuple
+
+
+def layout(robot: Robot, act: Actuation, load: Loads, gravity, steps: int) -> Layout:
+    """``rod.plan``'s intervals as ``steps`` RK4 steps each."""
+    pl = rod.plan(robot, act, load, gravity)
+    n = pl.b.size - 1
+    h = (pl.b[1:] - pl.b[:-1]) / steps
+    first = (np.arange(steps) == 0)[None, :, None]
+
+    def jump(d):
+        return jnp.where(first, d[:-1, None], 0.0).reshape(n * steps, 3)
+
+    return Layout(
+        jax.tree.map(lambda a: jnp.repeat(a, steps, axis=0), pl.intervals),
+        (pl.b[:-1, None] + h[:, None] * np.arange(steps)[None]).reshape(-1),
+        jnp.repeat(h, steps),
+        jump(pl.dN),
+        jump(pl.dM),
+        (pl.dN[-1], pl.dM[-1]),
+    )
+
+
+def _sweep(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, history, x, F_c):
+    """Integrates base to tip from the scaled base unknowns x (6,) with the stage points'
+    history terms ``history`` (n_steps, 4, 12): (v_h, u_h, q_h, w_h). Returns the scaled tip
+    residual (6,), the nodes (n_steps + 1 Dyn) and each stage point's (v, u, q, w) (n_steps, 4, 12)."""
+    after = jnp.array([0.5, 0.5, 1.0])
+    weights = jnp.array([1.0, 2.0, 2.0, 1.0]) / 6
+    f_d = load.distributed_force
+
+    def field(P: rod.Interval, s, z_h, d: Dyn):
+        seg = rod._segment(robot, P, s)
+        a = 1.0 + c.c0 * P.damping
+        v_h, u_h, q_h, w_h = z_h[:3], z_h[3:6], z_h[6:9], z_h[9:]
+        stiff = Segment(seg.K_se * a, seg.K_bt * a, seg.rho, seg.tau, seg.r, seg.backbone, seg.tilt, seg.dr)
+        R = d.y.R
+        # K' (v - v*') with K' = a K, v*' = (e3 - tau_d v_h) / a: the static relation shifted by K' (v*' - e3)
+        bf = R.T @ d.y.N - seg.K_se * (P.damping * v_h + (a - 1.0) * E3)
+        bm = R.T @ d.y.M - seg.K_bt * P.damping * u_h
+        v, u = body_strains(stiff, bf, bm)
+        v_t, u_t, q_t, w_t = c.c0 * v + v_h, c.c0 * u + u_h, c.c0 * d.q + q_h, c.c0 * d.w + w_h
+        dp = R @ v
+        dN = -P.rho * gravity - f_d + P.rho * (R @ (q_t + jnp.cross(d.w, d.q)))
+        dM = -jnp.cross(dp, d.y.N) + R @ (P.rhoJ * w_t + jnp.cross(d.w, P.rhoJ * d.w))
+        dq = v_t - jnp.cross(u, d.q) + jnp.cross(d.w, v)
+        dw = u_t - jnp.cross(u, d.w)
+        return Dyn(State(dp, R @ hat(u), dN, dM), dq, dw), jnp.concatenate([v, u, d.q, d.w])
+
+    def step(d: Dyn, k):
+        P, s0, h, dN, dM, z_h = k
+        d = d._replace(y=d.y._replace(N=d.y.N + dN, M=d.y.M + dM))
+        k1, z1 = field(P, s0, z_h[0], d)
+        k2, z2 = field(P, s0 + h / 2, z_h[1], jax.tree.map(lambda a, b: a + h * after[0] * b, d, k1))
+        k3, z3 = field(P, s0 + h / 2, z_h[2], jax.tree.map(lambda a, b: a + h * after[1] * b, d, k2))
+        k4, z4 = field(P, s0 + h, z_h[3], jax.tree.map(lambda a, b: a + h * after[2] * b, d, k3))
+        ks = (k1, k2, k3, k4)
+        new = jax.tree.map(lambda a, *b: a + h * sum(w * bi for w, bi in zip(weights, b, strict=True)), d, *ks)
+        new = new._replace(y=new.y._replace(R=orthonormalize(new.y.R)))
+        return new, (new, jnp.stack([z1, z2, z3, z4]))
+
+    L = robot.length
+    start = Dyn(State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:6] * F_c * L), jnp.zeros(3), jnp.zeros(3))
+    end, (nodes, z) = lax.scan(step, start, (lay.P, lay.s0, lay.h, lay.dN, lay.dM, history))
+    nodes = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), start, nodes)
+    N_L, M_L = end.y.N + lay.tip[0], end.y.M + lay.tip[1]
+    res = jnp.concatenate([(N_L - load.tip_force) / F_c, (M_L - load.tip_moment) / (F_c * L)])
+    return res, nodes, z
+
+
+class StepInfo(NamedTuple):
+    iterations: jax.Array
+    result: jax.Array
+    residual_norm: jax.Array
+
+
+def _root(robot, load, gravity, lay, c, history, guess, F_c, solver: SolverOptions):
+    """The base unknowns of one time step (``lax.custom_root``: implicit derivatives), found by
+    ``newton.newton`` (Levenberg-Marquardt-damped, so that a sudden input does not throw the first
+    iterate far off), and its Newton steps, status code and residual norm."""
+
+    def residual(x):
+        return _sweep(robot, load, gravity, lay, c, history, x, F_c)[0]
+
+    def damped(f, x0):
+        x, r, _, steps, code = newton.newton(lambda x: (f(x), ()), x0, solver.tol, solver.max_iter)
+        code = jnp.where(code == status.SUCCESS, code, jnp.where(jnp.all(jnp.isfinite(r)), status.NEWTON_LIMIT, status.NONFINITE))
+        # floats: custom_root differentiates its aux
+        return x, StepInfo(jnp.asarray(steps, float), code.astype(float), jnp.max(jnp.abs(r)))
+
+    def tangent_solve(g, y):
+        return jnp.linalg.solve(jax.jacfwd(g)(y), y)
+
+    x, info = lax.custom_root(residual, guess, damped, tangent_solve, has_aux=True)
+    info = lax.stop_gradient(info)
+    return x, StepInfo(info.iterations.astype(jnp.int32), info.result.astype(jnp.int32), info.residual_norm)
+
+
+@pytree
+class Trajectory:
+    """The robot along time (``simulate``), SI units, world frame.
+
+    Attributes:
+        t: times [s], (n,), the first the start.
+        s: arc length of each node [m], (n, m): ``steps`` nodes per breakpoint interval, and the tip.
+        position: p(s, t) [m], (n, m, 3). rotation: R(s, t), (n, m, 3, 3).
+        force, moment: the total internal force N [N] and moment M [N m] of rod plus tendons
+            (at s = 0 the load on the base), (n, m, 3).
+        velocity: p_t [m/s] and angular_velocity: R w [rad/s], (n, m, 3).
+        tensions: the tendon tensions [N], (n, n_t).
+        iterations: Newton steps of each time step (n,), 0 at the start.
+        result: each time step's status code (n,) (``tdct_jax.status``), SUCCESS (0) when its
+            scaled residual reached ``solver.tol``.
+        residual_norm: each time step's scaled residual, max norm (n,).
+    """
+
+    t: jax.Array
+    s: jax.Array
+    position: jax.Array
+    rotation: jax.Array
+    force: jax.Array
+    moment: jax.Array
+    velocity: jax.Array
+    angular_velocity: jax.Array
+    tensions: jax.Array
+    iterations: jax.Array
+    result: jax.Array
+    residual_norm: jax.Array
+
+    @property
+    def converged(self):
+        """Every time step converged."""
+        return jnp.all(self.result == status.SUCCESS)
+
+    @property
+    def tip_position(self):
+        """p(L, t) [m], (n, 3)."""
+        return self.position[..., -1, :]
+
+
+def _inputs(robot: Robot, tensions, tip_force, tip_moment, n: int | None):
+    """The per-time inputs as arrays (n, n_t), (n, 3), (n, 3) (constants broadcast along time) and n."""
+    rows = {}
+    for name, x, width, unit in (
+        ("tensions", tensions, robot.n_tendons, " N"),
+        ("tip_force", tip_force, 3, " N"),
+        ("tip_moment", tip_moment, 3, " N m"),
+    ):
+        x = jnp.zeros(width) if x is None else as_array(name, x, unit=unit)
+        if np.ndim(x) not in (1, 2) or np.shape(x)[-1] != width:
+            raise ValueError(f"{name} has shape {np.shape(x)}: ({width},) or (times, {width}) expected")
+        rows[name] = x
+    lengths = {name: np.shape(x)[0] for name, x in rows.items() if np.ndim(x) == 2}
+    if n is None:
+        if not lengths:
+            raise ValueError("steps: give the number of time steps, or inputs with a time axis")
+        n = max(lengths.values())
+    for name, m in lengths.items():
+        if m != n:
+            raise ValueError(f"{name} has {m} rows: one per time, {n} (steps + 1: row 0 is the start)")
+    check_range("tensions", rows["tensions"], 0.0, unit=" N")
+    return [jnp.broadcast_to(x, (n, np.shape(x)[-1])) for x in rows.values()], n
+
+
+def check(robot: Robot, load: Loads, solver: SolverOptions) -> None:
+    """What ``simulate`` does not handle yet, refused by name."""
+    if robot.masses:
+        raise ValueError("masses: point masses are not simulated yet (their inertia at a breakpoint); give none")
+    if robot.has_friction:
+        raise ValueError("sections[*].friction: tendon friction is not simulated yet; give none")
+    if load.scene is not None:
+        raise ValueError("scene: contact is not simulated yet")
+    if solver.transition != "balanced" or solver.tendon_model != "exact" or solver.intervals != 1:
+        raise ValueError("solver: simulate uses the 'balanced' transition, 'exact' tendons and single shooting (intervals = 1)")
+
+
+def simulate(
+    robot: Robot,
+    dt: float,
+    steps: int | None = None,
+    *,
+    tensions=None,
+    tip_force=None,
+    tip_moment=None,
+    insertions=None,
+    load: Loads | None = None,
+    start: str = "static",
+    alpha: float = ALPHA,
+    gravity=STANDARD_GRAVITY,
+    solver: SolverOptions = DEFAULT_SOLVER,
+    throw: bool = True,
+) -> Trajectory:
+    """The robot's motion under time-varying tendon tensions and tip loads (module docstring).
+
+    Args:
+        robot: any robot of the description; ``Section.damping`` sets material damping.
+        dt: time step [s].
+        steps: number of time steps; None: the inputs' time axis (its length less one: row 0 is
+            the start).
+        tensions: tendon tensions [N], (n_t,) for all times or (steps + 1, n_t), row i at t = i dt.
+        tip_force, tip_moment: world-frame tip load [N], [N m], (3,) or (steps + 1, 3).
+        insertions: tube depths [m], constant in time.
+        load: distributed force and point loads, constant in time (``Loads``; its tip load is
+            replaced by ``tip_force`` and ``tip_moment``).
+        start: "static": at rest in the static equilibrium of the inputs' first row; "straight":
+            the straight, unstrained robot at rest.
+        alpha: BDF-alpha parameter in [-0.5, 0] (module docstring).
+        gravity: world gravity [m/s^2].
+        solver: RK4 steps per breakpoint interval, Newton tolerance and limit per time step.
+        throw: raise ``ConvergenceError`` when a time step does not converge (naming it); else
+            check ``Trajectory.result``.
+
+    Returns:
+        Trajectory at the times 0, dt, ..., steps dt.
+    """
+    for name, obj, cls in (("robot", robot, Robot), ("solver", solver, SolverOptions)):
+        if not isinstance(obj, cls):
+            raise TypeError(f"{name} must be a tdct.{cls.__name__}, got {type(obj).__name__}")
+    if start not in ("static", "straight"):
+        raise ValueError(f"start = {start!r}: 'static' or 'straight'")
+    dt = as_array("dt", dt, (), unit=" s")
+    check_range("dt", dt, 0.0, lo_open=True, unit=" s")
+    check_range("alpha", alpha, -0.5, 0.0)
+    if steps is not None:
+        steps = int(steps)
+        check_range("steps", steps, 1)
+    (T, F, C), n = _inputs(robot, tensions, tip_force, tip_moment, None if steps is None else steps + 1)
+    load = Loads() if load is None else load
+    act = Actuation(T[0], jnp.zeros(robot.n_tubes) if insertions is None else insertions)
+    check(robot, load, solver)
+    g = gravity_vector(gravity)
+    base = jnp.concatenate([F[0], C[0] + jnp.cross(robot.length * E3, F[0])])  # the tip load carried to the base
+    if start == "static":  # the static solver's load continuation finds the start
+        base = solve(robot, act, load.with_tip(F[0], C[0]), gravity=g, solver=solver, throw=throw).base_wrench
+    out = _simulate(robot, act.insertions, load, T, F, C, dt, alpha, g, base, solver, start == "static")
+    if throw and is_concrete(out.result):
+        failed = np.flatnonzero(np.asarray(out.result) != status.SUCCESS)
+        if failed.size:
+            i = int(failed[0])
+            raise status.ConvergenceError(
+                f"simulate: time step {i} (t = {float(out.t[i]):g} s) did not converge: "
+                f"{status.message(int(out.result[i]), what='its Newton iteration', max_steps=solver.max_iter)}; "
+                "try a smaller dt or more solver.max_iter",
+                int(out.result[i]),
+            )
+    return out
+
+
+@jax.jit(static_argnames=("solver", "static_start"))
+def _simulate(robot, insertions, load, T, F, C, dt, alpha, gravity, base, solver, static_start):
+    """``simulate``'s compiled part: one scan over the time rows, each an implicit step (the first,
+    with ``static_start``, the static root: every coefficient zero), so that the root and the
+    sweep are compiled once; ``base``: the base wrench (N(0), M(0)) the first Newton starts from."""
+    n_nodes = rod.n_intervals(robot, load) * solver.steps
+    c = scheme(dt, alpha)
+
+    def inputs(i):
+        act = Actuation._rebuild(T[i], insertions, jnp.zeros(0), ())
+        return act, load.with_tip(F[i], C[i])
+
+    def advance(carry, i):
+        (x, x1), z1, z2, zt1 = carry
+        ci = jax.tree.map(lambda a: jnp.where(i == 0, 0.0, a), c)
+        act, ld = inputs(i)
+        F_c = rod.force_scale(robot, act, ld, gravity)
+        lay = layout(robot, act, ld, gravity, solver.steps)
+        history = ci.c1 * z1 + ci.c2 * z2 + ci.d1 * zt1
+        guess = jnp.where(i > 1, 2 * x - x1, x)  # the base wrench extrapolated from the last two steps
+        root, info = _root(robot, ld, gravity, lay, ci, history, guess, F_c, solver)
+        _, nodes, z = _sweep(robot, ld, gravity, lay, ci, history, root, F_c)
+        zt = ci.c0 * z + history
+        return ((root, x), z, jnp.where(i == 0, z, z1), zt), (nodes, info)
+
+    act0, load0 = inputs(0)
+    F_c0 = rod.force_scale(robot, act0, load0, gravity)
+    x0 = jnp.concatenate([base[:3], base[3:] / robot.length]) / F_c0
+    rest = jnp.broadcast_to(jnp.concatenate([E3, jnp.zeros(9)]), (n_nodes, 4, 12))
+    start = ((x0, x0), rest, rest, jnp.zeros_like(rest))
+    _, (nodes, info) = lax.scan(advance, start, jnp.arange(0 if static_start else 1, T.shape[0]))
+    s = jnp.concatenate([layout(robot, act0, load0, gravity, solver.steps).s0, robot.length[None]])
+    if not static_start:  # the straight, unstrained robot at rest
+        zeros = jnp.zeros((s.size, 3))
+        straight = Dyn(State(s[:, None] * E3, jnp.broadcast_to(jnp.eye(3), (s.size, 3, 3)), zeros, zeros), zeros, zeros)
+        nodes = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), straight, nodes)
+        first = StepInfo(jnp.int32(0), jnp.int32(status.SUCCESS), jnp.zeros(()))
+        info = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), first, info)
+    y = nodes.y
+    return Trajectory(
+        jnp.arange(T.shape[0]) * dt,
+        jnp.broadcast_to(s, (T.shape[0], s.size)),
+        y.p,
+        y.R,
+        y.N,
+        y.M,
+        jnp.einsum("...ij,...j->...i", y.R, nodes.q),
+        jnp.einsum("...ij,...j->...i", y.R, nodes.w),
+        T,
+        info.iterations,
+        info.result,
+        info.residual_norm,
+    )

@@ -1,0 +1,163 @@
+"""tdct.simulate (issue 49): a slender steel cantilever's free vibration against Euler-Bernoulli
+theory, the scheme's order in dt, its numerical dissipation, Kelvin-Voigt decay against its
+closed form, settling onto the static solution, global momentum balance and exact derivatives
+of a trajectory loss. One robot and one step count: one compiled simulation (two with grad)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import tdct_jax as tdct
+from tdct_jax.dynamics import simulate
+
+L, D, E, RHO = 0.3, 2e-3, 200e9, 7800.0
+A, I = np.pi / 4 * D**2, np.pi / 64 * D**4
+OMEGA = np.array([1.8751, 4.6941, 7.8548]) ** 2 * np.sqrt(E * I / (RHO * A)) / L**2
+"""Euler-Bernoulli's first three natural frequencies of the cantilever [rad/s]."""
+T1 = 2 * np.pi / OMEGA[0]
+STEPS = 300
+SOLVER = tdct.SolverOptions(steps=20)
+PUSH = np.zeros((STEPS + 1, 3))
+PUSH[0, 1] = 1e-3
+"""A 1 mN tip force held until t = 0, then released: free vibration about the straight rod."""
+
+
+def robot(damping=0.0, E=E):
+    section = tdct.Section(end=L, outer_diameter=D, E=E, nu=0.3, density=RHO, damping=damping)
+    return tdct.Robot(L, (section,), (tdct.Tendon(offset=5e-3, angle=np.pi / 2),))
+
+
+def free(n, damping=0.0, alpha=-0.2):
+    """The released cantilever at n steps per Euler-Bernoulli period, without gravity."""
+    return simulate(robot(damping), T1 / n, tip_force=PUSH, tensions=[0.0], gravity=None, solver=SOLVER, alpha=alpha)
+
+
+def first_mode(y, dt):
+    """(frequency [rad/s], decay rate [1/s]) of the first mode in the signal y by the matrix
+    pencil method (sums of damped exponentials)."""
+    rows = len(y) // 2
+    Y = np.array([y[i : i + rows + 1] for i in range(len(y) - rows)])
+    V = np.linalg.svd(Y, full_matrices=False)[2][:6].T
+    z = np.linalg.eigvals(np.linalg.pinv(V[:-1]) @ V[1:])
+    z = z[np.angle(z) > 1e-9]
+    k = np.argmin(np.abs(np.angle(z) / dt - OMEGA[0]))
+    return np.angle(z[k]) / dt, -np.log(np.abs(z[k])) / dt
+
+
+@pytest.fixture(scope="module")
+def runs():
+    return {(n, zeta): free(n, 2 * zeta / OMEGA[0]) for n in (50, 100) for zeta in (0.0, 0.02)}
+
+
+def test_first_natural_frequency_converges_to_euler_bernoulli_at_second_order(runs):
+    errors = {}
+    for n in (50, 100):
+        traj = runs[n, 0.0]
+        assert bool(traj.converged)
+        w, _ = first_mode(np.asarray(traj.tip_position[:, 1]), T1 / n)
+        errors[n] = w / OMEGA[0] - 1
+    assert abs(errors[100]) < 5e-3
+    assert 3.0 < errors[50] / errors[100] < 5.0  # second order in dt
+
+
+def test_numerical_dissipation_shrinks_with_dt(runs):
+    """Without material damping the first mode decays only by the scheme's own dissipation
+    (BDF-alpha, alpha = -0.2): its energy (twice the amplitude's decay rate) loses under 0.1% a
+    period at 100 steps a period, and over fourfold less than at half that (second order at
+    least; the higher modes, damped more, are left out by the pencil)."""
+    lost = {n: 2 * first_mode(np.asarray(runs[n, 0.0].tip_position[:, 1]), T1 / n)[1] * T1 for n in (50, 100)}
+    assert 0 < lost[100] < 1e-3
+    assert lost[50] / lost[100] > 4.0
+
+
+def test_kelvin_voigt_decay_matches_its_closed_form(runs):
+    """B = tau_d K: the first mode decays as exp(-zeta omega t), zeta = tau_d omega / 2, on top of
+    the scheme's own dissipation (the undamped run's)."""
+    for n, tol in ((50, 0.02), (100, 0.005)):
+        own = first_mode(np.asarray(runs[n, 0.0].tip_position[:, 1]), T1 / n)[1]
+        damped = first_mode(np.asarray(runs[n, 0.02].tip_position[:, 1]), T1 / n)[1]
+        assert (damped - own) / (0.02 * OMEGA[0]) == pytest.approx(1.0, abs=tol)
+
+
+def test_a_damped_pull_settles_onto_the_static_solution():
+    damped = robot(2 / OMEGA[0])  # the first mode critically damped
+    tensions = np.full((STEPS + 1, 1), 2.0)
+    tensions[0] = 0.0
+    traj = simulate(damped, T1 / 20, tensions=tensions, gravity=(0.0, -9.81, 0.0), solver=SOLVER)
+    static = tdct.solve(damped, tdct.Actuation([2.0]), solver=SOLVER)
+    np.testing.assert_allclose(traj.tip_position[-1], static.tip_position, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(traj.force[-1, 0], static.total_force[0], rtol=0, atol=1e-9)
+
+
+def test_global_momentum_balance():
+    """The base's impulse is the rod's loss of momentum (no gravity, no tip load): int_0^t N(0) dt
+    = -(int rho A p_t ds)(t), under a smooth pull of the tendon (2 N, sin^2 over half a period),
+    to O(dt^2): below 0.5% of the momentum's largest at 50 steps a period, and over threefold less
+    at half the step once the pull is done."""
+    late = {}
+    for n in (50, 100):
+        dt = T1 / n
+        t = np.arange(STEPS + 1) * dt
+        pull = 2.0 * np.sin(np.pi * np.minimum(t / T1, 0.5)) ** 2
+        traj = simulate(robot(), dt, tensions=pull[:, None], gravity=None, solver=SOLVER)
+        momentum = RHO * A * np.trapezoid(np.asarray(traj.velocity[..., 1]), np.asarray(traj.s[0]), axis=1)
+        base = np.asarray(traj.force[:, 0, 1])
+        impulse = np.concatenate([[0.0], np.cumsum((base[1:] + base[:-1]) / 2 * dt)])
+        error = np.abs(impulse + momentum - momentum[0]) / np.abs(momentum).max()
+        assert error.max() < 5e-3
+        late[n] = error[t > T1].max()
+    assert late[50] / late[100] > 3.0
+
+
+@pytest.mark.slow
+def test_derivatives_of_a_trajectory_loss_match_central_differences():
+    """jax.grad of a loss over the whole trajectory, through every step's implicit solve, in E,
+    the damping and one entry of the tension history, against central differences."""
+    tensions = np.zeros((STEPS + 1, 1))
+    tensions[1:40] = 1.0
+    tight = tdct.SolverOptions(steps=20, tol=1e-13)
+
+    def loss(E, damping, tensions):
+        traj = simulate(robot(damping, E), T1 / 50, tensions=tensions, gravity=None, solver=tight, throw=False)
+        return jnp.sum(traj.tip_position[:, 1] ** 2)
+
+    args = (E, 2e-4, jnp.asarray(tensions))
+    grads = jax.grad(loss, argnums=(0, 1, 2))(*args)
+    for k, h in ((0, 1e-4 * E), (1, 1e-4 * 2e-4)):
+        plus, minus = list(args), list(args)
+        plus[k], minus[k] = args[k] + h, args[k] - h
+        fd = (loss(*plus) - loss(*minus)) / (2 * h)
+        assert float(grads[k]) == pytest.approx(float(fd), rel=1e-6)
+    e = np.zeros_like(tensions)
+    e[10] = 1e-4
+    fd = (loss(E, 2e-4, tensions + e) - loss(E, 2e-4, tensions - e)) / 2e-4
+    assert float(grads[2][10, 0]) == pytest.approx(float(fd), rel=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("kw", "words"),
+    [
+        ({"dt": 0.0}, "dt = 0 is outside the allowed range (0, inf] s"),
+        ({"alpha": 0.3}, "alpha = 0.3 is outside"),
+        ({"tensions": np.zeros((5, 2))}, "tensions has shape (5, 2)"),
+        ({"tensions": np.zeros((5, 1)), "tip_force": np.zeros((6, 3))}, "tensions has 5 rows: one per time, 6"),
+        ({"start": "moving"}, "start = 'moving'"),
+        ({"tensions": [-1.0]}, "tensions"),
+    ],
+)
+def test_bad_input_is_refused_by_name(kw, words):
+    args = {"dt": 1e-3, "steps": 4} | kw
+    dt, steps = args.pop("dt"), args.pop("steps")
+    with pytest.raises(ValueError, match=None) as e:
+        simulate(robot(), dt, None if "tensions" in args and np.ndim(args["tensions"]) == 2 else steps, **args)
+    assert words in str(e.value)
+
+
+def test_what_is_not_simulated_yet_is_refused():
+    heavy = robot().replace(masses=(tdct.PointMass(0.1, 1e-3),))
+    with pytest.raises(ValueError, match="masses"):
+        simulate(heavy, 1e-3, 4)
+    rough = robot().replace({"sections[0].friction": 0.1})
+    with pytest.raises(ValueError, match="friction"):
+        simulate(rough, 1e-3, 4)
