@@ -84,13 +84,15 @@ class Dyn(NamedTuple):
 
 class Layout(NamedTuple):
     """One time step's integration plan: per RK4 step (P intervals x ``steps``), its interval's
-    parameters, start s0 [m], length h [m] and the jump (dN, dM) at its start; the jump at L."""
+    parameters, start s0 [m], length h [m], the jump (dN, dM) and point mass [kg] at its start;
+    the jump and point mass at L."""
 
     P: rod.Interval
     s0: jax.Array
     h: jax.Array
     dN: jax.Array
     dM: jax.Array
+    mass: jax.Array
     tip: tuple
 
 
@@ -110,14 +112,17 @@ def layout(robot: Robot, act: Actuation, load: Loads, gravity, steps: int) -> La
         jnp.repeat(h, steps),
         jump(pl.dN),
         jump(pl.dM),
-        (pl.dN[-1], pl.dM[-1]),
+        jnp.where(first[..., 0], pl.mass[:-1, None], 0.0).reshape(-1),
+        (pl.dN[-1], pl.dM[-1], pl.mass[-1]),
     )
 
 
 def _sweep(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, history, x, F_c):
-    """Integrates base to tip from the scaled base unknowns x (6,) with the stage points'
-    history terms ``history`` (n_steps, 4, 12): (v_h, u_h, q_h, w_h). Returns the scaled tip
-    residual (6,), the nodes (n_steps + 1 Dyn) and each stage point's (v, u, q, w) (n_steps, 4, 12)."""
+    """Integrates base to tip from the scaled base unknowns x (6,) with the history terms
+    ``history``: the stage points' (v_h, u_h, q_h, w_h) (n_steps, 4, 12) and the tip's (q_h, w_h)
+    (6,). Returns the scaled tip residual (6,), the nodes (n_steps + 1 Dyn) and what the history
+    is made of: each stage point's (v, u, q, w) and the tip's (q, w). A point mass m at a step's
+    start (or at L) takes m (g - p_tt) from N, p_tt = R (q_t + w x q) there (stage 1's history)."""
     after = jnp.array([0.5, 0.5, 1.0])
     weights = jnp.array([1.0, 2.0, 2.0, 1.0]) / 6
     f_d = load.distributed_force
@@ -140,9 +145,12 @@ def _sweep(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, history, 
         dw = u_t - jnp.cross(u, d.w)
         return Dyn(State(dp, R @ hat(u), dN, dM), dq, dw), jnp.concatenate([v, u, d.q, d.w])
 
+    def acceleration(d: Dyn, q_h):
+        return d.y.R @ (c.c0 * d.q + q_h + jnp.cross(d.w, d.q))
+
     def step(d: Dyn, k):
-        P, s0, h, dN, dM, z_h = k
-        d = d._replace(y=d.y._replace(N=d.y.N + dN, M=d.y.M + dM))
+        P, s0, h, dN, dM, m, z_h = k
+        d = d._replace(y=d.y._replace(N=d.y.N + dN + m * acceleration(d, z_h[0, 6:9]), M=d.y.M + dM))
         k1, z1 = field(P, s0, z_h[0], d)
         k2, z2 = field(P, s0 + h / 2, z_h[1], jax.tree.map(lambda a, b: a + h * after[0] * b, d, k1))
         k3, z3 = field(P, s0 + h / 2, z_h[2], jax.tree.map(lambda a, b: a + h * after[1] * b, d, k2))
@@ -154,11 +162,13 @@ def _sweep(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, history, 
 
     L = robot.length
     start = Dyn(State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:6] * F_c * L), jnp.zeros(3), jnp.zeros(3))
-    end, (nodes, z) = lax.scan(step, start, (lay.P, lay.s0, lay.h, lay.dN, lay.dM, history))
+    stages, tip = history
+    end, (nodes, z) = lax.scan(step, start, (lay.P, lay.s0, lay.h, lay.dN, lay.dM, lay.mass, stages))
     nodes = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), start, nodes)
-    N_L, M_L = end.y.N + lay.tip[0], end.y.M + lay.tip[1]
+    dN_L, dM_L, m_L = lay.tip
+    N_L, M_L = end.y.N + dN_L + m_L * acceleration(end, tip[:3]), end.y.M + dM_L
     res = jnp.concatenate([(N_L - load.tip_force) / F_c, (M_L - load.tip_moment) / (F_c * L)])
-    return res, nodes, z
+    return res, nodes, (z, jnp.concatenate([end.q, end.w]))
 
 
 class StepInfo(NamedTuple):
@@ -257,8 +267,6 @@ def _inputs(robot: Robot, tensions, tip_force, tip_moment, n: int | None):
 
 def check(robot: Robot, load: Loads, solver: SolverOptions) -> None:
     """What ``simulate`` does not handle yet, refused by name."""
-    if robot.masses:
-        raise ValueError("masses: point masses are not simulated yet (their inertia at a breakpoint); give none")
     if robot.has_friction:
         raise ValueError("sections[*].friction: tendon friction is not simulated yet; give none")
     if load.scene is not None:
@@ -357,18 +365,18 @@ def _simulate(robot, insertions, load, T, F, C, dt, alpha, gravity, base, solver
         act, ld = inputs(i)
         F_c = rod.force_scale(robot, act, ld, gravity)
         lay = layout(robot, act, ld, gravity, solver.steps)
-        history = ci.c1 * z1 + ci.c2 * z2 + ci.d1 * zt1
+        history = jax.tree.map(lambda a, b, d: ci.c1 * a + ci.c2 * b + ci.d1 * d, z1, z2, zt1)
         guess = jnp.where(i > 1, 2 * x - x1, x)  # the base wrench extrapolated from the last two steps
         root, info = _root(robot, ld, gravity, lay, ci, history, guess, F_c, solver)
         _, nodes, z = _sweep(robot, ld, gravity, lay, ci, history, root, F_c)
-        zt = ci.c0 * z + history
-        return ((root, x), z, jnp.where(i == 0, z, z1), zt), (nodes, info)
+        zt = jax.tree.map(lambda a, b: ci.c0 * a + b, z, history)
+        return ((root, x), z, jax.tree.map(lambda a, b: jnp.where(i == 0, a, b), z, z1), zt), (nodes, info)
 
     act0, load0 = inputs(0)
     F_c0 = rod.force_scale(robot, act0, load0, gravity)
     x0 = jnp.concatenate([base[:3], base[3:] / robot.length]) / F_c0
-    rest = jnp.broadcast_to(jnp.concatenate([E3, jnp.zeros(9)]), (n_nodes, 4, 12))
-    start = ((x0, x0), rest, rest, jnp.zeros_like(rest))
+    rest = (jnp.broadcast_to(jnp.concatenate([E3, jnp.zeros(9)]), (n_nodes, 4, 12)), jnp.zeros(6))
+    start = ((x0, x0), rest, rest, jax.tree.map(jnp.zeros_like, rest))
     _, (nodes, info) = lax.scan(advance, start, jnp.arange(0 if static_start else 1, T.shape[0]))
     s = jnp.concatenate([layout(robot, act0, load0, gravity, solver.steps).s0, robot.length[None]])
     if not static_start:  # the straight, unstrained robot at rest

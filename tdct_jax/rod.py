@@ -86,14 +86,17 @@ class Interval(NamedTuple):
 
 class Plan(NamedTuple):
     """The integration plan: sorted breakpoints b (K + 1,), the intervals' parameters (K, ...), the
-    jump (dN, dM) applied at each breakpoint (K + 1, 3) each, and the index of the interval that
-    starts where the first tube ends (the paper's transition applies there; -1 without a tube)."""
+    jump (dN, dM) applied at each breakpoint (K + 1, 3) each, the index of the interval that
+    starts where the first tube ends (the paper's transition applies there; -1 without a tube),
+    and the point mass at each breakpoint (K + 1,) [kg] (their weight is in dN; dynamics.py adds
+    their inertia)."""
 
     b: jax.Array
     intervals: Interval
     dN: jax.Array
     dM: jax.Array
     tube_end: jax.Array
+    mass: jax.Array
 
 
 def _tendon_fields(robot: Robot):
@@ -203,15 +206,19 @@ def plan(robot: Robot, act: Actuation, load: Loads, gravity) -> Plan:
     group = _groups(robot)
     n_s, n_a = len(robot.sections) - 1, sum(t.end is not None for t in robot.tendons)
     kind = np.repeat(np.arange(5), [1, n_s, n_a, len(robot.masses), 1])  # base, section end, anchor, mass, L
-    F_own = jnp.zeros((len(own), 3))
+    m_own = jnp.zeros(len(own))
     if robot.masses:
-        mass = jnp.stack([m.mass for m in robot.masses])
-        F_own = F_own.at[1 + n_s + n_a : -1].set(mass[:, None] * gravity[None])
+        m_own = m_own.at[1 + n_s + n_a : -1].set(jnp.stack([m.mass for m in robot.masses]))
+    F_own = m_own[:, None] * gravity[None]
     leads = np.unique(group)
     members = np.asarray(group)[None, :] == leads[:, None]  # (groups, own)
     v = jnp.stack([jnp.asarray(x, float) for x in own])
     shift = (jnp.asarray(members, float) @ (v - lax.stop_gradient(v))) / members.sum(axis=1)
-    b_own, F_lead = lax.stop_gradient(v)[leads] + shift, jnp.asarray(members, float) @ F_own
+    b_own, F_lead, m_lead = (
+        lax.stop_gradient(v)[leads] + shift,
+        jnp.asarray(members, float) @ F_own,
+        jnp.asarray(members, float) @ m_own,
+    )
     by = [leads[kind[leads] == k] for k in range(5)]
     s_p = jnp.asarray(load.point_s, float).reshape(-1)
     F_p = jnp.reshape(jnp.asarray(load.point_force, float), (-1, 3))
@@ -230,6 +237,7 @@ def plan(robot: Robot, act: Actuation, load: Loads, gravity) -> Plan:
     n = b_all.size
     dN_all = jnp.zeros((n, 3)).at[lead_rows].set(-F_lead).at[first[4] : first[5]].set(-F_p)
     dM_all = jnp.zeros((n, 3)).at[first[4] : first[5]].set(-C_p)
+    m_all = jnp.zeros(n).at[lead_rows].set(m_lead)
     if n <= 3:
         # one breakpoint between base and tip (0 <= it <= L): the order is known, and the
         # intervals' parameters do not depend on where it lies, so a batch of insertions shares
@@ -249,7 +257,7 @@ def plan(robot: Robot, act: Actuation, load: Loads, gravity) -> Plan:
     mid = (b[:-1] + b[1:]) / 2
     intervals = jax.vmap(lambda k, s: interval_parameters(robot, act, k, ranks, s))(k, mid)
     tube_end = ranks.tubes[0] if robot.tubes else jnp.asarray(-1, rank.dtype)
-    return Plan(b, intervals, dN_all[order], dM_all[order], tube_end)
+    return Plan(b, intervals, dN_all[order], dM_all[order], tube_end, m_all[order])
 
 
 def force_scale(robot: Robot, act: Actuation, load: Loads, gravity):

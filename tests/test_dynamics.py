@@ -33,15 +33,15 @@ def free(n, damping=0.0, alpha=-0.2):
     return simulate(robot(damping), T1 / n, tip_force=PUSH, tensions=[0.0], gravity=None, solver=SOLVER, alpha=alpha)
 
 
-def first_mode(y, dt):
-    """(frequency [rad/s], decay rate [1/s]) of the first mode in the signal y by the matrix
-    pencil method (sums of damped exponentials)."""
+def first_mode(y, dt, near=OMEGA[0]):
+    """(frequency [rad/s], decay rate [1/s]) of the mode nearest ``near`` in the signal y by the
+    matrix pencil method (sums of damped exponentials)."""
     rows = len(y) // 2
     Y = np.array([y[i : i + rows + 1] for i in range(len(y) - rows)])
     V = np.linalg.svd(Y, full_matrices=False)[2][:6].T
     z = np.linalg.eigvals(np.linalg.pinv(V[:-1]) @ V[1:])
     z = z[np.angle(z) > 1e-9]
-    k = np.argmin(np.abs(np.angle(z) / dt - OMEGA[0]))
+    k = np.argmin(np.abs(np.angle(z) / dt - near))
     return np.angle(z[k]) / dt, -np.log(np.abs(z[k])) / dt
 
 
@@ -78,6 +78,32 @@ def test_kelvin_voigt_decay_matches_its_closed_form(runs):
         own = first_mode(np.asarray(runs[n, 0.0].tip_position[:, 1]), T1 / n)[1]
         damped = first_mode(np.asarray(runs[n, 0.02].tip_position[:, 1]), T1 / n)[1]
         assert (damped - own) / (0.02 * OMEGA[0]) == pytest.approx(1.0, abs=tol)
+
+
+def test_a_tip_mass_follows_the_frequency_equation_and_settles_with_its_weight():
+    """A point mass M = 0.3 rho A L at the tip: Euler-Bernoulli's frequency equation
+    1 + cos b cosh b + (M / rho A L) b (cos b sinh b - sin b cosh b) = 0 (first root by bisection),
+    omega = b^2 sqrt(EI / rho A) / L^2; then, damped, a pull under gravity settles onto ``solve``."""
+    ratio = 0.3
+    heavy = robot().replace(masses=(tdct.PointMass(L, ratio * RHO * A * L),))
+
+    def equation(b):
+        return 1 + np.cos(b) * np.cosh(b) + ratio * b * (np.cos(b) * np.sinh(b) - np.sin(b) * np.cosh(b))
+
+    lo, hi = 0.5, 1.8751
+    for _ in range(60):
+        lo, hi = (lo, (lo + hi) / 2) if equation(lo) * equation((lo + hi) / 2) <= 0 else ((lo + hi) / 2, hi)
+    omega = lo**2 * np.sqrt(E * I / (RHO * A)) / L**2
+    period = 2 * np.pi / omega
+    traj = simulate(heavy, period / 100, tip_force=PUSH, tensions=[0.0], gravity=None, solver=SOLVER)
+    w, _ = first_mode(np.asarray(traj.tip_position[:, 1]), period / 100, omega)
+    assert w / omega - 1 == pytest.approx(0.0, abs=2e-3)
+    damped = heavy.replace({"sections[0].damping": 2 / omega})
+    tensions = np.full((STEPS + 1, 1), 1.0)
+    tensions[0] = 0.0
+    traj = simulate(damped, period / 20, tensions=tensions, gravity=(0.0, -9.81, 0.0), solver=SOLVER)
+    static = tdct.solve(damped, tdct.Actuation([1.0]), solver=SOLVER)
+    np.testing.assert_allclose(traj.tip_position[-1], static.tip_position, rtol=0, atol=1e-9)
 
 
 def test_a_damped_pull_settles_onto_the_static_solution():
@@ -155,9 +181,6 @@ def test_bad_input_is_refused_by_name(kw, words):
 
 
 def test_what_is_not_simulated_yet_is_refused():
-    heavy = robot().replace(masses=(tdct.PointMass(0.1, 1e-3),))
-    with pytest.raises(ValueError, match="masses"):
-        simulate(heavy, 1e-3, 4)
     rough = robot().replace({"sections[0].friction": 0.1})
     with pytest.raises(ValueError, match="friction"):
         simulate(rough, 1e-3, 4)
