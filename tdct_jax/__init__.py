@@ -31,7 +31,10 @@ from .description import Robot as Robot  # noqa: E402
 from .description import Section as Section  # noqa: E402
 from .description import Tendon as Tendon  # noqa: E402
 from .description import Tube as Tube  # noqa: E402
+from .dynamics import Motion as Motion  # noqa: E402
+from .dynamics import MotionFit as MotionFit  # noqa: E402
 from .dynamics import Trajectory as Trajectory  # noqa: E402
+from .dynamics import fit_motion as fit_motion  # noqa: E402
 from .dynamics import simulate as simulate  # noqa: E402
 from .estimate import ForceEstimate as ForceEstimate  # noqa: E402
 from .estimate import TipPose as TipPose  # noqa: E402

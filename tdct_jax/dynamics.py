@@ -400,3 +400,87 @@ def _simulate(robot, insertions, load, T, F, C, dt, alpha, gravity, base, solver
         info.result,
         info.residual_norm,
     )
+
+
+@pytree
+class Motion:
+    """A recorded motion to fit (``fit_motion``): the inputs at each time row (row 0: the start,
+    t = 0) and the measured tip positions there, SI units.
+
+    Attributes:
+        dt: time step [s]. tensions: (n, n_t) [N]. tip: measured tip positions (n, 3) [m], world
+            frame; rows that are NaN are not fitted. tip_force: (n, 3) [N], or None (none).
+    """
+
+    dt: float
+    tensions: jax.Array
+    tip: jax.Array
+    tip_force: jax.Array | None = None
+
+
+class MotionFit(NamedTuple):
+    """``fit_motion``'s result: the fitted values by field name, their standard errors (the
+    Gauss-Newton covariance, delta method from the log coordinates) and correlation, the robot
+    with them, the tip RMSE [m] before and after, and Levenberg-Marquardt's outcome."""
+
+    values: dict
+    std_errors: dict
+    correlation: np.ndarray
+    robot: Robot
+    rmse_before: float
+    rmse_after: float
+    iterations: int
+    converged: bool
+    message: str
+
+
+def fit_motion(robot: Robot, motion: Motion, params=("sections[*].E", "sections[*].damping"), *, max_steps: int = 20, **options):
+    """Fits positive robot fields (default: the modulus and the damping of every section) to a
+    recorded motion by Levenberg-Marquardt on the tip residuals, with their exact Jacobian
+    through the whole simulation (``jax.jacfwd`` in the log of each value). ``options`` go to
+    ``simulate`` (start, alpha, gravity, solver); the start values are the robot's."""
+    from . import fields, lm
+
+    params = tuple(params)
+    for p in params:
+        fields.check(robot, p)
+    start = np.array([fields.value(robot, p) for p in params], float)
+    if np.any(start <= 0):
+        raise ValueError(
+            f"fit_motion: start values {dict(zip(params, start.tolist(), strict=True))} must be positive (fitted in log)"
+        )
+    measured = np.asarray(motion.tip, float)
+    used = np.all(np.isfinite(measured), axis=1)
+    options = {"solver": DEFAULT_SOLVER} | options
+    simulate(robot, motion.dt, tensions=motion.tensions, tip_force=motion.tip_force, **options)  # checks the inputs once
+
+    @jax.jit
+    def residual_and_jacobian(x):
+        def tips(x):
+            fitted = fields.replace(robot, {p: jnp.exp(x[i]) for i, p in enumerate(params)})
+            traj = simulate(fitted, motion.dt, tensions=motion.tensions, tip_force=motion.tip_force, throw=False, **options)
+            r = (traj.tip_position[used] - measured[used]).ravel()
+            return r, (r, jnp.max(traj.result))
+
+        J, (r, code) = jax.jacfwd(tips, has_aux=True)(x)
+        return r, J, code
+
+    def evaluate(x):
+        r, J, code = residual_and_jacobian(jnp.asarray(x))
+        return np.asarray(r), np.asarray(J), int(code), None
+
+    r0 = evaluate(np.log(start))[0]
+    fit = lm.levenberg_marquardt(evaluate, np.log(start), max_steps=max_steps)
+    _, se, corr, _ = lm.covariance(fit, fit.residual.size)
+    values = {p: float(np.exp(fit.x[i])) for i, p in enumerate(params)}
+    return MotionFit(
+        values,
+        {p: float(values[p] * se[i]) for i, p in enumerate(params)},
+        corr,
+        fields.replace(robot, values),
+        float(np.sqrt(np.mean(r0**2) * 3)),
+        float(np.sqrt(np.mean(fit.residual**2) * 3)),
+        fit.iterations,
+        fit.converged,
+        fit.message,
+    )

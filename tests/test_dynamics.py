@@ -184,3 +184,23 @@ def test_what_is_not_simulated_yet_is_refused():
     rough = robot().replace({"sections[0].friction": 0.1})
     with pytest.raises(ValueError, match="friction"):
         simulate(rough, 1e-3, 4)
+
+
+@pytest.mark.slow
+def test_a_motion_fit_recovers_modulus_and_damping_within_their_standard_errors():
+    """A synthetic recording (a smooth 1 N pull, 100 steps, 1 um noise per coordinate) of the
+    cantilever with E and tau_d known, fitted from E 30% high and tau_d 2.5x: both recovered
+    within three standard errors, the residual at the noise."""
+    n, dt = 100, T1 / 50
+    t = np.arange(n + 1) * dt
+    pull = (np.sin(np.pi * np.minimum(t / T1, 0.5)) ** 2)[:, None]
+    truth = {"sections[*].E": E, "sections[*].damping": 2e-4}
+    traj = simulate(robot(2e-4), dt, tensions=pull, gravity=None, solver=SOLVER)
+    noise = 1e-6
+    tip = np.asarray(traj.tip_position) + noise * np.random.default_rng(0).standard_normal((n + 1, 3))
+    fit = tdct.fit_motion(robot(5e-4, 1.3 * E), tdct.Motion(dt, pull, tip), gravity=None, solver=SOLVER)
+    assert fit.converged
+    for name, value in truth.items():
+        assert abs(fit.values[name] - value) < 3 * fit.std_errors[name]
+        assert fit.std_errors[name] < 0.01 * value
+    assert fit.rmse_after == pytest.approx(np.sqrt(3) * noise, rel=0.2)
