@@ -4,21 +4,29 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import csv
 import dataclasses
+import difflib
+import io
 import json
 import math
 import os
 import re
 import sys
+import time
 import warnings
 from pathlib import Path
+from typing import NamedTuple
 
 import jax
 import numpy as np
 
 from . import fields, rod, status
 from .checks import UnitWarning, check_output, interval, target_note
+from .data import _error, _number, _read_text
 from .description import CalibrationWarning, Robot
+from .dynamics import ALPHA, simulate
+from .dynamics import check as check_dynamics
 from .ik import MAX_STEPS as IK_MAX_STEPS
 from .ik.starts import STARTS as IK_STARTS
 from .inputs import STANDARD_GRAVITY, Actuation, Loads
@@ -33,7 +41,7 @@ COMPILE_CACHE_ENV = "TDCT_COMPILE_CACHE"
 """Environment variable: a folder for the CLI's compilation cache, or 0 / off for none."""
 SLURM_TASKS = "SLURM_STEP_NUM_TASKS"
 """Set by srun to the number of tasks (processes) of the job step: ``tdct sweep`` runs distributed above one."""
-ON_CPU = ("solve", "compliance", "synth", "calibrate", "ik")
+ON_CPU = ("solve", "compliance", "synth", "calibrate", "ik", "simulate")
 """Verbs that run on the CPU even where an accelerator is the default: single solves and small
 batches are faster there (each small operation on a GPU is a kernel launch)."""
 
@@ -165,6 +173,16 @@ SCENE_HELP = (
     "obstacles the robot rests on or presses against, SI units (docs/contact.md): frictionless contact along the body "
     "and at the tip"
 )
+
+TIME_COLUMN = "t_s"
+"""The input table's time column [s] (``tdct simulate``)."""
+TIP_FORCE_COLUMNS = ("tip_force_x_N", "tip_force_y_N", "tip_force_z_N")
+"""The input table's optional tip force columns [N], world frame."""
+FRAMES = 60
+"""Frames of ``tdct simulate --gif`` by default (at 20 frames a second: 3 s)."""
+MAX_TIME_STEPS = 100_000
+"""Most time steps ``tdct simulate`` takes in one run: beyond, a table in milliseconds read as
+seconds (or --dt-ms typed in seconds) would run for hours and fill the memory."""
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -389,10 +407,62 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help=f"call jax.distributed.initialize() and write one part per process (automatic when {SLURM_TASKS} > 1, under srun)",
     )
+    m = verbs.add_parser(
+        "simulate",
+        parents=[described],
+        help="the robot in motion under tendon tensions and tip forces given along time (docs/dynamics.md)",
+        epilog="The input table: a CSV with the time column t_s (seconds, from 0, increasing), one column per tendon "
+        "tension_1_N, tension_2_N, ... (newtons, tendons numbered from 1) and optionally tip_force_x_N, tip_force_y_N, "
+        "tip_force_z_N (world frame, a missing one 0); linear between its rows, the last row held after its time "
+        "(docs/cli.md). --max-iter limits the Newton steps of each time step.",
+    )
+    m.add_argument("--inputs", required=True, metavar="inputs.csv", help="the input table (CSV, format below)")
+    m.add_argument(
+        "--dt-ms",
+        type=_finite,
+        required=True,
+        help="time step in ms (e.g. 1); the simulation's times are 0, dt, 2 dt, ... up to --duration-s",
+    )
+    m.add_argument(
+        "--duration-s",
+        type=_finite,
+        help="simulated time in s (default: the input table's last time); beyond the table its last row is held",
+    )
+    m.add_argument(
+        "--start",
+        choices=["static", "straight"],
+        default="static",
+        help="static: at rest in the static shape of the table's first row (default); straight: the straight, "
+        "unstrained robot at rest",
+    )
+    m.add_argument(
+        "--alpha",
+        type=_finite,
+        default=ALPHA,
+        help=f"BDF-alpha parameter in [-0.5, 0] (default {ALPHA:g}): 0 damps the fastest modes most, -0.5 not at all "
+        "(and lets the base force grow: use -0.3 or more)",
+    )
+    depth = m.add_mutually_exclusive_group()
+    depth.add_argument(
+        "--insertion-mm", type=_finite, help="tube insertion depth in mm, for a robot with one tube, held in time (default 0)"
+    )
+    depth.add_argument(
+        "--insertions-mm", type=_floats(), metavar="D1,D2,...", help="insertion depth of each tube in mm, held in time"
+    )
+    m.add_argument(
+        "--out",
+        metavar="DIR",
+        help="write trajectory.csv (time, tip in mm, inputs, result code per step) and trajectory.npz (every "
+        "trajectory array, SI units) into the folder DIR (made if missing)",
+    )
+    m.add_argument("--plot", metavar="tip.png", help="save the tip against time and its path (x-y and z-y, mm)")
+    m.add_argument("--gif", metavar="robot.gif", help="save an animation of the robot's side view (z-y, mm)")
+    m.add_argument("--frames", type=int, default=FRAMES, help=f"frames of the --gif, evenly spaced in time (default {FRAMES})")
+    m.add_argument("--quiet", action="store_true", help="no progress output")
     return parser
 
 
-OUTPUTS = {"plot": "--plot", "csv": "--csv"}
+OUTPUTS = {"plot": "--plot", "csv": "--csv", "gif": "--gif"}
 """File outputs by destination and flag, checked before any computation; folders (--out) are
 checked by their verbs."""
 
@@ -400,6 +470,8 @@ checked by their verbs."""
 def _check_output(dest: str, flag: str, path) -> None:
     """``check_output`` for a file flag; a figure's suffix must be a format matplotlib writes
     (or none: PNG)."""
+    if dest == "gif":
+        return check_output(flag, path, suffixes=(".gif",), kind="a GIF")
     if dest != "plot":
         return check_output(flag, path)
     from matplotlib.backend_bases import FigureCanvasBase
@@ -442,17 +514,7 @@ def _inputs(args):
         raise ValueError(f"--tensions {','.join(f'{t:g}' for t in args.tensions)}: the robot has no tendons; leave it out")
     tensions = args.tensions if args.tensions is not None else (0.0,) * n_t
     _check_tensions("--tensions", tensions, robot)
-    n_tubes = robot.n_tubes
-    if args.insertions_mm is not None:
-        flag, depths = "--insertions-mm", args.insertions_mm
-        check_count(flag, depths, n_tubes, f"the robot has {n_tubes} tubes, one depth each")
-    else:
-        flag, depths = "--insertion-mm", (0.0,) * n_tubes if args.insertion_mm is None else (args.insertion_mm,)
-        if args.insertion_mm is not None and n_tubes != 1:
-            raise ValueError(
-                f"--insertion-mm {args.insertion_mm:g}: the robot has {n_tubes} tubes; give --insertions-mm, one depth each"
-            )
-    check_flag(flag, depths, 0.0, length_mm, " mm")
+    depths = _depths_typed(args, robot)
     if args.tip_mass_g is not None:
         check_flag("--tip-mass-g", args.tip_mass_g, 0.0, unit=" g")
         tip_force = Loads.from_mass(args.tip_mass_g * 1e-3).tip_force
@@ -468,6 +530,22 @@ def _inputs(args):
     point_s = [s * 1e-3 for s, _ in args.point_load]
     load = Loads(tip_force, args.tip_moment, point_s, [f for _, f in args.point_load] if point_s else None)
     return robot, act, load, options
+
+
+def _depths_typed(args, robot: Robot) -> tuple:
+    """The tube depths [mm] of --insertion-mm or --insertions-mm (default all 0), one per tube, checked."""
+    n_tubes = robot.n_tubes
+    if args.insertions_mm is not None:
+        flag, depths = "--insertions-mm", args.insertions_mm
+        check_count(flag, depths, n_tubes, f"the robot has {n_tubes} tubes, one depth each")
+    else:
+        flag, depths = "--insertion-mm", (0.0,) * n_tubes if args.insertion_mm is None else (args.insertion_mm,)
+        if args.insertion_mm is not None and n_tubes != 1:
+            raise ValueError(
+                f"--insertion-mm {args.insertion_mm:g}: the robot has {n_tubes} tubes; give --insertions-mm, one depth each"
+            )
+    check_flag(flag, depths, 0.0, 1e3 * float(robot.length), " mm")
+    return tuple(depths)
 
 
 def _check_displacements(pulled, robot: Robot) -> None:
@@ -932,6 +1010,259 @@ def _sweep_command(args) -> int:
     return 0
 
 
+class InputTable(NamedTuple):
+    """``tdct simulate``'s input table in SI units: its times [s] (k,), from 0 and increasing, the
+    tendon tensions [N] (k, n_t) and the world-frame tip force [N] (k, 3) of each row."""
+
+    t: np.ndarray
+    tensions: np.ndarray
+    tip_force: np.ndarray
+
+    def at(self, times) -> tuple[np.ndarray, np.ndarray]:
+        """(tensions, tip force) at ``times`` [s], linear between rows, the last row held after it."""
+
+        def columns(x):
+            return np.stack([np.interp(times, self.t, c) for c in x.T], axis=-1).reshape(len(times), x.shape[1])
+
+        return columns(self.tensions), columns(self.tip_force)
+
+
+def read_input_table(path, n_tendons: int) -> InputTable:
+    """Reads ``tdct simulate``'s input table (docs/cli.md): a CSV whose first line names its columns,
+    ``t_s``, ``tension_1_N`` to ``tension_{n_tendons}_N`` and optionally ``tip_force_{x,y,z}_N``
+    (a missing one 0); blank lines and lines starting with '#' are skipped.
+
+    Raises:
+        ValueError: ``path:line: ...`` naming the column, the value and what is allowed: an
+            unreadable file, a missing time column, a first time other than 0, times that do not
+            increase, unknown or missing columns (one tension column per tendon), a value that is
+            not a finite number, a negative tension.
+    """
+    path = Path(path)
+    text = _read_text(path, "input table")
+    reader = csv.reader(io.StringIO(text))
+    header, names, rows = 0, None, []
+    try:
+        for fields in reader:
+            if not fields or (len(fields) == 1 and not fields[0].strip()) or fields[0].lstrip().startswith("#"):
+                continue
+            if names is None:
+                header, names = reader.line_num, [f.strip() for f in fields]
+            elif len(fields) != len(names):
+                raise _error(
+                    path, reader.line_num, f"{len(fields)} field(s), but the column line (line {header}) names {len(names)}"
+                )
+            else:
+                rows.append((reader.line_num, fields))
+    except csv.Error as e:
+        raise _error(path, reader.line_num, f"not a CSV file: {e}") from None
+    if names is None:
+        raise _error(path, 0, f"empty: no column line (its first line names the columns, {TIME_COLUMN} first)")
+    tensions = [f"tension_{i}_N" for i in range(1, n_tendons + 1)]
+    robot = f"the robot has {n_tendons} tendon{'s' * (n_tendons != 1)}"
+    allowed = [TIME_COLUMN, *tensions, *TIP_FORCE_COLUMNS]
+    said = ", ".join(
+        [TIME_COLUMN, *tensions[:1], *(["...", tensions[-1]] if n_tendons > 2 else tensions[1:]), *TIP_FORCE_COLUMNS]
+    )
+    for name in names:
+        if names.count(name) > 1:
+            raise _error(path, header, f"column {name!r} twice; each column once")
+        if name in allowed:
+            continue
+        numbered = re.fullmatch(r"tension_(\d+)_N", name)
+        if numbered:
+            raise _error(path, header, f"column {name!r}: {robot}, so the tension columns are {', '.join(tensions) or 'none'}")
+        close = [TIME_COLUMN] if re.fullmatch(r"t(ime)?(_\w*)?", name, re.I) else difflib.get_close_matches(name, allowed, n=1)
+        guess = f" (did you mean {close[0]!r}?)" if close else ""
+        hint = "; separate the columns by commas" if ";" in name or "\t" in name else ""
+        raise _error(path, header, f"unknown column {name!r}{guess}; the columns are {said}{hint}")
+    if TIME_COLUMN not in names:
+        raise _error(path, header, f"no time column {TIME_COLUMN!r} (the times in seconds, from 0); columns present: {names}")
+    missing = [c for c in tensions if c not in names]
+    if missing:
+        raise _error(
+            path,
+            header,
+            f"no column(s) {', '.join(missing)}: {robot}, one tension column each ({tensions[0]} to {tensions[-1]}, in N)",
+        )
+    if not rows:
+        raise _error(path, header, "no rows: the column line is followed by no values")
+    index = {name: names.index(name) for name in names}
+    values = {name: np.array([_number(path, line, name, f[index[name]]) for line, f in rows]) for name in names}
+    lines = [line for line, _ in rows]
+    t = values[TIME_COLUMN]
+    if t[0] != 0:
+        raise _error(path, lines[0], f"{TIME_COLUMN} = {t[0]:g} s: the table starts at t = 0 (the start of the simulation)")
+    back = np.flatnonzero(np.diff(t) <= 0)
+    if back.size:
+        k = back[0] + 1
+        raise _error(
+            path, lines[k], f"{TIME_COLUMN} = {t[k]:g} s is not after the row before's {t[k - 1]:g} s; the times must increase"
+        )
+    for name in tensions:
+        negative = np.flatnonzero(values[name] < 0)
+        if negative.size:
+            k = negative[0]
+            raise _error(path, lines[k], f"{name} = {values[name][k]:g} N is outside the allowed range [0, inf) N")
+    zeros = np.zeros(len(rows))
+    return InputTable(
+        t,
+        np.stack([values[c] for c in tensions], axis=-1).reshape(len(rows), n_tendons),
+        np.stack([values.get(c, zeros) for c in TIP_FORCE_COLUMNS], axis=-1),
+    )
+
+
+def _simulate_command(args) -> int:
+    from tqdm import tqdm
+
+    check_flag("--dt-ms", args.dt_ms, 0.0, unit=" ms", lo_open=True)
+    if args.duration_s is not None:
+        check_flag("--duration-s", args.duration_s, 0.0, unit=" s", lo_open=True)
+    check_flag("--alpha", args.alpha, -0.5, 0.0)
+    check_flag("--frames", args.frames, 2)
+    if args.out:
+        check_output("--out", args.out, folder=True)
+    robot = _robot(args)
+    solver = _solver(args)
+    depths = _depths_typed(args, robot)
+    try:
+        check_dynamics(robot, Loads(), solver)
+    except ValueError as e:
+        raise ValueError(f"--robot {args.robot}: {e}" if args.robot else str(e)) from None
+    table = read_input_table(args.inputs, robot.n_tendons)
+    dt = args.dt_ms * 1e-3
+    duration = float(table.t[-1]) if args.duration_s is None else args.duration_s
+    if duration == 0:
+        raise ValueError(f"{args.inputs}: one row, at t = 0: give --duration-s, the time to hold it for")
+    steps = math.floor(duration / dt + 1e-9)  # the last time: the largest multiple of dt within the duration
+    if steps < 1:
+        raise ValueError(f"--duration-s {duration:g} is shorter than one time step, --dt-ms {args.dt_ms:g}")
+    if steps > MAX_TIME_STEPS:
+        raise ValueError(
+            f"{duration:g} s ({'--duration-s' if args.duration_s else 'the table'}) in steps of --dt-ms {args.dt_ms:g} is "
+            f"{steps} time steps, more than {MAX_TIME_STEPS}: are the table's t_s in seconds and --dt-ms in "
+            "milliseconds? Else simulate in parts"
+        )
+    if duration > table.t[-1]:
+        print(f"tdct: note: the table ends at {table.t[-1]:g} s; its last row is held to {duration:g} s", file=sys.stderr)
+    times = np.arange(steps + 1) * dt
+    tensions, tip_force = table.at(times)
+    if not args.quiet:
+        print(
+            f"simulating {steps} steps of {args.dt_ms:g} ms to t = {times[-1]:g} s in one compiled program "
+            "(compiling takes about half a minute the first time)",
+            file=sys.stderr,
+            flush=True,
+        )
+    started = time.perf_counter()
+    traj = simulate(
+        robot,
+        dt,
+        tensions=tensions,
+        tip_force=tip_force,
+        insertions=[d * 1e-3 for d in depths],
+        start=args.start,
+        alpha=args.alpha,
+        gravity=_gravity(args),
+        solver=solver,
+        throw=False,
+    )
+    traj = jax.tree.map(np.asarray, traj)
+    seconds = time.perf_counter() - started
+    result = traj.result
+    failed = np.flatnonzero(result != status.SUCCESS)
+    good = int(failed[0]) if failed.size else len(result)  # the rows before the first failure
+    newton = f"{np.mean(traj.iterations[1:]):.1f} Newton steps a step"
+    state = "every step converged" if not failed.size else f"{failed.size} of {len(result)} steps did NOT converge"
+    print(f"simulated {steps} steps of {args.dt_ms:g} ms to t = {times[-1]:g} s in {seconds:.1f} s: {state} ({newton})")
+    if good:
+        tip, last = 1e3 * traj.tip_position[good - 1], "" if good == len(result) else ", the last converged"
+        print(f"tip at t = {times[good - 1]:g} s{last} [mm]: x = {tip[0]:.4f}, y = {tip[1]:.4f}, z = {tip[2]:.4f}")
+    written = []
+    if args.out:
+        written += _write_trajectory(Path(args.out), traj, tip_force, args, dt)
+    title = f"{Path(args.robot).stem if args.robot else 'paper robot'}, inputs {Path(args.inputs).name}, dt {args.dt_ms:g} ms"
+    shown = jax.tree.map(lambda a: a[:good], traj)
+    if good < 2 and (args.plot or args.gif):
+        print("tdct: note: no figures: fewer than two times converged", file=sys.stderr)
+    if good > 1 and args.plot:
+        from .plotting import plot_tip_path
+
+        plot_tip_path(shown, args.plot, title=title)
+        written.append(args.plot)
+    if good > 1 and args.gif:
+        from .plotting import animate_trajectory
+
+        with tqdm(total=min(args.frames, good), desc="animating", unit="frame", disable=args.quiet, leave=False) as bar:
+            animate_trajectory(shown, args.gif, frames=args.frames, title=title, progress=lambda i, n: bar.update(1))
+        written.append(args.gif)
+    if written:
+        print(f"wrote {', '.join(map(str, written))}")
+    if failed.size:
+        raise ConvergenceError(_step_failure(traj, int(failed[0]), solver, args), int(result[failed[0]]))
+    return 0
+
+
+def _step_failure(traj, i: int, solver: SolverOptions, args) -> str:
+    """What went wrong at row ``i`` of a trajectory, and what to do, in tdct simulate's flags."""
+    code, t = int(traj.result[i]), float(traj.t[i])
+    if code == status.NEWTON_LIMIT:
+        why = (
+            f"Newton used its --max-iter {solver.max_iter} steps without bringing the scaled tip residual "
+            f"({float(traj.residual_norm[i]):.3g}) below {solver.tol:g}"
+        )
+    else:
+        why = status.NAMES.get(code, f"result code {code}")
+    kept = f"; {args.out}/trajectory.csv and .npz keep every step's result code" if args.out else ""
+    kept += "; the figures stop before it" if args.plot or args.gif else ""
+    if i == 0:
+        return (
+            f"the start (the static shape of the table's first row) did not converge: {why}; raise --max-iter, "
+            f"or start from the straight robot (--start straight){kept}"
+        )
+    return (
+        f"time step {i} (t = {t:g} s) did not converge: {why}. Raise --max-iter, or change --dt-ms: smaller "
+        "where the inputs jump, larger where hundreds of steps per period of the robot's slowest mode stretch the "
+        f"single shooting beyond float64 (docs/dynamics.md, Limits){kept}"
+    )
+
+
+def _write_trajectory(out: Path, traj, tip_force, args, dt: float) -> list[Path]:
+    """trajectory.csv (t_s, tip in mm, the inputs, each step's result code) and trajectory.npz
+    (every Trajectory array and the tip force [N], SI units, and a JSON ``metadata`` entry with the
+    units and the run's settings) in the folder ``out``; returns their paths."""
+    out.mkdir(parents=True, exist_ok=True)
+    n_t = traj.tensions.shape[1]
+    names = [TIME_COLUMN, "tip_x_mm", "tip_y_mm", "tip_z_mm", *(f"tension_{i}_N" for i in range(1, n_t + 1))]
+    names += [*TIP_FORCE_COLUMNS, "result"]
+    table = np.column_stack([traj.t, 1e3 * traj.tip_position, traj.tensions, tip_force])
+    rows = [",".join([*(f"{v:.12g}" for v in row), str(int(code))]) for row, code in zip(table, traj.result, strict=True)]
+    csv_path, npz_path = out / "trajectory.csv", out / "trajectory.npz"
+    csv_path.write_text("\n".join([",".join(names), *rows]) + "\n")
+    units = dict(
+        t="s", s="m", position="m", rotation="1 (world from body)", force="N", moment="N m", velocity="m/s",
+        angular_velocity="rad/s", tensions="N", tip_force="N", iterations="Newton steps",
+        result="tdct_jax.status code, 0 converged", residual_norm="1 (scaled tip residual, max norm)",
+    )  # fmt: skip
+    metadata = dict(
+        units=units,
+        frame="world; gravity along -y; force and moment: the total internal force and moment of rod plus tendons",
+        dt_s=dt,
+        alpha=args.alpha,
+        start=args.start,
+        gravity=not args.no_gravity,
+        rk4_steps=args.steps,
+        max_iter=args.max_iter,
+        robot=str(args.robot) if args.robot else "the paper's robot (Robot.paper())",
+        set={name: value for name, value in args.set},
+        inputs=str(args.inputs),
+        tdct_jax=__version__,
+    )
+    arrays = {f.name: getattr(traj, f.name) for f in dataclasses.fields(traj)}
+    np.savez(npz_path, **arrays, tip_force=tip_force, metadata=np.array(json.dumps(metadata)))
+    return [csv_path, npz_path]
+
+
 COMMANDS = {
     "solve": _solve_command,
     "compliance": _compliance_command,
@@ -940,6 +1271,7 @@ COMMANDS = {
     "calibrate": _calibrate_command,
     "ik": _ik_command,
     "sweep": _sweep_command,
+    "simulate": _simulate_command,
 }
 
 

@@ -936,3 +936,115 @@ def plot_contact_press(res: dict, path: str | Path | None = None, title: str | N
     if title:
         fig.suptitle(title)
     return _finish(fig, path)
+
+
+@_styled
+def plot_tip_path(traj, path: str | Path | None = None, title: str | None = None):
+    """The tip of a simulated robot (``tdct.simulate``'s Trajectory) in mm: its x, y and z and the
+    tendon tensions [N] against time [s], and its path seen along the base axis (x-y) and from the
+    side (z-y), coloured by time, the start and the end marked.
+
+    Args:
+        traj: a Trajectory (JAX or numpy arrays).
+        path: where to save a PNG; the figure is returned either way.
+        title: figure title.
+    """
+    plt = _pyplot()
+    t, tip, T = np.asarray(traj.t), 1e3 * np.asarray(traj.position)[:, -1], np.asarray(traj.tensions)
+    fig = plt.figure(figsize=(16, 6.4), layout="constrained")
+    grid = fig.add_gridspec(4, 3, width_ratios=(1.4, 1, 1))
+    left = [fig.add_subplot(grid[0, 0])]
+    left += [fig.add_subplot(grid[k, 0], sharex=left[0]) for k in range(1, 4)]
+    least = max(1e-3, 1e-3 * np.ptp(tip, axis=0).max())  # a coordinate that moves less is drawn flat, not as round-off
+    for k, ax in enumerate(left[:3]):
+        ax.plot(t, tip[:, k], color=f"C{k}", lw=1.6)
+        ax.set_ylabel(f"tip {'xyz'[k]} [mm]")
+        ax.tick_params(labelbottom=False)
+        ax.ticklabel_format(axis="y", useOffset=False)
+        if np.ptp(tip[:, k]) < least:
+            middle = (tip[:, k].max() + tip[:, k].min()) / 2
+            ax.set_ylim(middle - least, middle + least)
+    for j in range(T.shape[1]):
+        left[3].plot(t, T[:, j], lw=1.4, label=f"tendon {j + 1}")
+    if 0 < T.shape[1] <= 12:  # below the panel: a legend inside would hide the lines at 0
+        left[3].legend(fontsize="small", ncols=min(T.shape[1], 3), loc="upper center", bbox_to_anchor=(0.5, -0.45))
+    left[3].set_ylabel("tension [N]")
+    left[3].set_xlabel("t [s]")
+    left[3].xaxis.set_major_locator(_pyplot().MaxNLocator(6))
+    paths = [fig.add_subplot(grid[:, 1]), fig.add_subplot(grid[:, 2])]
+    for ax, (h, v), name in zip(
+        paths, ((0, 1), (2, 1)), ("tip path seen along the base axis", "tip path, side view"), strict=True
+    ):
+        ax.plot(tip[:, h], tip[:, v], color="0.7", lw=1, zorder=1)
+        dots = ax.scatter(tip[:, h], tip[:, v], c=t, cmap="viridis", s=9, zorder=2)
+        ax.plot(*tip[0, [h, v]], "o", mfc="none", mec="black", ms=11, mew=1.5, label=f"start, t = {t[0]:g} s", zorder=3)
+        ax.plot(*tip[-1, [h, v]], "s", mfc="none", mec="tab:red", ms=11, mew=1.5, label=f"end, t = {t[-1]:g} s", zorder=3)
+        ax.set_xlabel(f"{'xyz'[h]} [mm]")
+        ax.set_ylabel(f"{'xyz'[v]} [mm]")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(name)
+    paths[0].legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.1), ncols=2)
+    fig.colorbar(dots, ax=paths, label="t [s]", shrink=0.8)
+    if title:
+        fig.suptitle(title)
+    return _finish(fig, path)
+
+
+GIF_FPS = 20
+"""Frames a second of ``animate_trajectory``'s GIFs (a GIF's frame delay is in hundredths of a
+second, and viewers slow shorter delays than 2 of them)."""
+
+
+@_styled
+def animate_trajectory(traj, path: str | Path, frames: int = 60, title: str | None = None, progress=None, dpi: int = 80):
+    """A GIF of a simulated robot's side view (world z-y, mm): its centreline at ``frames`` times
+    spread evenly over the trajectory (every time when it has fewer), the tip's path so far and the
+    start's centreline dashed, the time in each frame's title; saved with Pillow at ``GIF_FPS``.
+
+    Args:
+        traj: a Trajectory (JAX or numpy arrays).
+        path: the GIF to write.
+        frames: the most frames.
+        title: figure title.
+        progress: called as ``progress(frame, frames)`` after each frame is drawn (a progress bar).
+        dpi: pixels per inch of the 7 x 6.2 inch frames.
+
+    Returns:
+        The trajectory rows drawn, one per frame (ints).
+    """
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    plt = _pyplot()
+    t, p = np.asarray(traj.t), 1e3 * np.asarray(traj.position)
+    rows = np.unique(np.round(np.linspace(0, len(t) - 1, min(frames, len(t)))).astype(int))
+    dt = t[1] - t[0] if len(t) > 1 else 1.0
+    digits = max(0, -int(np.floor(np.log10(dt) + 1e-9)))  # the time to the step's last digit
+    zy = p[rows][..., [2, 1]].reshape(-1, 2)
+    middle, half = (zy.max(0) + zy.min(0)) / 2, 0.55 * max(np.ptp(zy, axis=0).max(), 1e-3)
+    fig, ax = plt.subplots(figsize=(7, 6.2), layout="constrained")
+    ax.set_xlim(middle[0] - half, middle[0] + half)
+    ax.set_ylim(middle[1] - half, middle[1] + half)
+    ax.set_aspect("equal", adjustable="box")
+    ax.plot(p[0, :, 2], p[0, :, 1], "--", color="0.6", lw=1.5, label=f"t = {t[0]:g} s")
+    body = ax.plot([], [], color="tab:blue", lw=3, solid_capstyle="round", label="centreline")[0]
+    trace = ax.plot([], [], color="tab:red", lw=1, alpha=0.7, label="tip path")[0]
+    tip = ax.plot([], [], "o", color="tab:red", ms=6)[0]
+    ax.plot(0, 0, "ks", ms=8, label="base")
+    ax.set_xlabel("z [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.legend(loc="best", fontsize="small")
+    if title:
+        fig.suptitle(title, fontsize="medium")
+
+    def draw(k):
+        i = rows[k]
+        body.set_data(p[i, :, 2], p[i, :, 1])
+        trace.set_data(p[: i + 1, -1, 2], p[: i + 1, -1, 1])
+        tip.set_data(p[i, -1, 2:3], p[i, -1, 1:2])
+        ax.set_title(f"side view, t = {t[i]:.{digits}f} s")
+        return body, trace, tip
+
+    animation = FuncAnimation(fig, draw, frames=len(rows), blit=False)
+    animation.save(path, writer=PillowWriter(fps=GIF_FPS), dpi=dpi, progress_callback=progress)
+    plt.close(fig)
+    return rows

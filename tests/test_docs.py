@@ -64,7 +64,7 @@ def test_docs_site_builds_strict(tmp_path):
     )
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
     cli_page = (tmp_path / "site" / "cli" / "index.html").read_text()
-    for verb in ("solve", "compliance", "ik", "sweep", "synth", "calibrate", "reproduce"):
+    for verb in ("solve", "compliance", "ik", "simulate", "sweep", "synth", "calibrate", "reproduce"):
         assert f"usage: tdct {verb}" in cli_page, f"the CLI reference lacks tdct {verb} --help"
 
 
