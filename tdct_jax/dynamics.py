@@ -177,26 +177,79 @@ class StepInfo(NamedTuple):
     residual_norm: jax.Array
 
 
-def _root(robot, load, gravity, lay, c, history, guess, F_c, solver: SolverOptions):
-    """The base unknowns of one time step (``lax.custom_root``: implicit derivatives), found by
-    ``newton.newton`` (Levenberg-Marquardt-damped, so that a sudden input does not throw the first
-    iterate far off), and its Newton steps, status code and residual norm."""
+def _newton(f, x0, solver: SolverOptions) -> tuple:
+    """``newton.newton`` (Levenberg-Marquardt-damped, so that a sudden input does not throw the
+    first iterate far off) on the residual f: the point and its StepInfo."""
+    x, r, _, steps, code = newton.newton(lambda x: (f(x), ()), x0, solver.tol, solver.max_iter)
+    code = jnp.where(code == status.SUCCESS, code, jnp.where(jnp.all(jnp.isfinite(r)), status.NEWTON_LIMIT, status.NONFINITE))
+    return x, StepInfo(jnp.asarray(steps, jnp.int32), code.astype(jnp.int32), jnp.max(jnp.abs(r)))
 
-    def residual(x):
-        return _sweep(robot, load, gravity, lay, c, history, x, F_c)[0]
 
-    def damped(f, x0):
-        x, r, _, steps, code = newton.newton(lambda x: (f(x), ()), x0, solver.tol, solver.max_iter)
-        code = jnp.where(code == status.SUCCESS, code, jnp.where(jnp.all(jnp.isfinite(r)), status.NEWTON_LIMIT, status.NONFINITE))
-        # floats: custom_root differentiates its aux
-        return x, StepInfo(jnp.asarray(steps, float), code.astype(float), jnp.max(jnp.abs(r)))
+def _step(robot, gravity, at, c, history, guess, solver: SolverOptions):
+    """The base unknowns of one time step, ``at(lam)`` its (actuation, loads) with the step's
+    change of inputs scaled by lam (1: the step's own). Newton from ``guess``; where it fails, load
+    continuation as in statics: ``solver.stages`` ramps of equal stages in turn, each stage from
+    the last one's root. That search runs without derivatives; the root is then taken once more by
+    ``lax.custom_root`` at the full inputs (one residual evaluation when the search converged), so
+    derivatives of anything downstream go through each step's implicit solve.
+
+    Returns the root, the StepInfo (Newton steps of the search, the code of the root) and the
+    step's (layout, force scale)."""
+
+    def residual_at(lam):
+        act, ld = at(lam)
+        F_c = rod.force_scale(robot, act, ld, gravity)
+        lay = layout(robot, act, ld, gravity, solver.steps)
+        return ld, lay, F_c, lambda x: _sweep(robot, ld, gravity, lay, c, history, x, F_c)[0]
+
+    frozen = lax.stop_gradient((robot, gravity, c, history, guess))
+
+    def search():
+        robot_, gravity_, c_, history_, guess_ = frozen
+
+        def attempt(state):
+            a, _, iterations, _ = state
+            k = jnp.asarray(solver.stages)[a]
+
+            def stage(j, carry):
+                x, its, code = carry
+                act, ld = at((j + 1) / k)
+                act, ld = lax.stop_gradient((act, ld))
+                F_c = rod.force_scale(robot_, act, ld, gravity_)
+                lay = layout(robot_, act, ld, gravity_, solver.steps)
+                x_new, info = _newton(lambda x: _sweep(robot_, ld, gravity_, lay, c_, history_, x, F_c)[0], x, solver)
+                ok = code == status.SUCCESS
+                return jnp.where(ok, x_new, x), its + info.iterations, jnp.where(ok, info.result, code)
+
+            x, its, code = lax.fori_loop(0, k, stage, (guess_, jnp.int32(0), jnp.int32(status.SUCCESS)))
+            return a + 1, x, iterations + its, code
+
+        def more(state):
+            a, _, _, code = state
+            return (code != status.SUCCESS) & (a < len(solver.stages))
+
+        first = (jnp.int32(0), guess_, jnp.int32(0), jnp.int32(status.NEWTON_LIMIT))
+        _, x, iterations, _ = lax.while_loop(more, attempt, first)
+        return x, iterations
+
+    found, iterations = search()
+    ld, lay, F_c, residual = residual_at(1.0)
+
+    def checked(f, x0):
+        norm = jnp.max(jnp.abs(f(x0)))
+        x, info = lax.cond(
+            norm <= solver.tol,
+            lambda: (x0, StepInfo(jnp.int32(0), jnp.int32(status.SUCCESS), norm)),
+            lambda: _newton(f, x0, solver),
+        )
+        return x, tuple(jnp.asarray(a, float) for a in info)  # floats: custom_root differentiates its aux
 
     def tangent_solve(g, y):
         return jnp.linalg.solve(jax.jacfwd(g)(y), y)
 
-    x, info = lax.custom_root(residual, guess, damped, tangent_solve, has_aux=True)
+    x, info = lax.custom_root(residual, found, checked, tangent_solve, has_aux=True)
     info = lax.stop_gradient(info)
-    return x, StepInfo(info.iterations.astype(jnp.int32), info.result.astype(jnp.int32), info.residual_norm)
+    return x, StepInfo(iterations + info[0].astype(jnp.int32), info[1].astype(jnp.int32), info[2]), (ld, lay, F_c)
 
 
 @pytree
@@ -355,19 +408,18 @@ def _simulate(robot, insertions, load, T, F, C, dt, alpha, gravity, base, solver
     n_nodes = rod.n_intervals(robot, load) * solver.steps
     c = scheme(dt, alpha)
 
-    def inputs(i):
-        act = Actuation._rebuild(T[i], insertions, jnp.zeros(0), ())
-        return act, load.with_tip(F[i], C[i])
+    def inputs(i, lam=1.0):
+        """Row i's inputs, or with lam < 1 those of row i - 1 moved lam of the way to row i."""
+        j = jnp.maximum(i - 1, 0)
+        T_i, F_i, C_i = (a[j] + lam * (a[i] - a[j]) for a in (T, F, C))
+        return Actuation._rebuild(T_i, insertions, jnp.zeros(0), ()), load.with_tip(F_i, C_i)
 
     def advance(carry, i):
         (x, x1), z1, z2, zt1 = carry
         ci = jax.tree.map(lambda a: jnp.where(i == 0, 0.0, a), c)
-        act, ld = inputs(i)
-        F_c = rod.force_scale(robot, act, ld, gravity)
-        lay = layout(robot, act, ld, gravity, solver.steps)
         history = jax.tree.map(lambda a, b, d: ci.c1 * a + ci.c2 * b + ci.d1 * d, z1, z2, zt1)
         guess = jnp.where(i > 1, 2 * x - x1, x)  # the base wrench extrapolated from the last two steps
-        root, info = _root(robot, ld, gravity, lay, ci, history, guess, F_c, solver)
+        root, info, (ld, lay, F_c) = _step(robot, gravity, lambda lam: inputs(i, lam), ci, history, guess, solver)
         _, nodes, z = _sweep(robot, ld, gravity, lay, ci, history, root, F_c)
         zt = jax.tree.map(lambda a, b: ci.c0 * a + b, z, history)
         return ((root, x), z, jax.tree.map(lambda a, b: jnp.where(i == 0, a, b), z, z1), zt), (nodes, info)
