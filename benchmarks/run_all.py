@@ -29,6 +29,7 @@ SCRIPTS = (
     ("sweep_throughput.py", {}),  # one device, then one per core
     ("durable_sweep.py", {}),
     ("ik.py", {}),
+    ("dynamics_speed.py", {}),  # about 30 s quick; the full run is long (compiles per step length)
     ("gpu_throughput.py", {}),  # writes nothing where JAX sees no GPU
 )
 """(script, extra environment) in the order they run."""
@@ -176,6 +177,37 @@ def summary(suffix: str, seconds: dict) -> str:
         lines += [f"Inverse kinematics against the forward solve ({ik['date']}, load {ik['load'][0]:.1f}):", ""]
         lines += _table(("what", "median"), [(k, f"{v:.3f} ms") for k, v in ik["median_ms"].items()])
         lines += _table(("ratio", "measured", "goal"), [(k, f"{v:.2f}", ik["goals"].get(k, "")) for k, v in ik["ratios"].items()])
+    dynamics = _load("dynamics_speed", suffix)
+    if dynamics:
+        lines += [f"`tdct.simulate`, a tendon pulled in 0.1 s (load {dynamics['load_average'][0]:.1f}):", ""]
+        lines += _table(
+            (
+                "robot",
+                "dt",
+                "RK4 steps",
+                "Newton tol",
+                "per time step",
+                "real-time factor",
+                "Newton steps",
+                "tip vs reference",
+                "compile",
+            ),
+            [
+                (
+                    r["robot"],
+                    f"{r['dt_ms']:g} ms",
+                    r["rk4_steps"],
+                    f"{r['newton_tol']:.0e}",
+                    f"{r['ms_per_time_step']:.2f} ms",
+                    f"{r['real_time_factor']:.2f}x",
+                    f"{r['mean_newton_steps']:.2f}",
+                    "-" if r["max_tip_error_um"] is None else f"{r['max_tip_error_um']:.1f} um",
+                    f"{r['compile_s']:.1f} s",
+                )
+                for r in dynamics["rows"]
+                if dynamics["quick"] or r.get("working") or r["rk4_steps"] != 20 or r["newton_tol"] != 1e-10
+            ],
+        )
     if gpu:
         lines += [f"On the GPU ({gpu['device']}, {gpu['date']}, jax {gpu['jax']}, {gpu['steps']} steps):", ""]
         lines += _table(
