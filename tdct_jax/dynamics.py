@@ -185,11 +185,11 @@ def _newton(f, x0, solver: SolverOptions) -> tuple:
     return x, StepInfo(jnp.asarray(steps, jnp.int32), code.astype(jnp.int32), jnp.max(jnp.abs(r)))
 
 
-def _step(robot, gravity, at, c, history, guess, solver: SolverOptions):
+def _step(robot, gravity, at, c, history, guess, previous, solver: SolverOptions):
     """The base unknowns of one time step, ``at(lam)`` its (actuation, loads) with the step's
     change of inputs scaled by lam (1: the step's own). Newton from ``guess``; where it fails, load
-    continuation as in statics: ``solver.stages`` ramps of equal stages in turn, each stage from
-    the last one's root. That search runs without derivatives; the root is then taken once more by
+    continuation as in statics from the last step's root ``previous``: ``solver.stages`` ramps of
+    equal stages in turn, each stage from the last one's root. That search runs without derivatives; the root is then taken once more by
     ``lax.custom_root`` at the full inputs (one residual evaluation when the search converged), so
     derivatives of anything downstream go through each step's implicit solve.
 
@@ -202,10 +202,10 @@ def _step(robot, gravity, at, c, history, guess, solver: SolverOptions):
         lay = layout(robot, act, ld, gravity, solver.steps)
         return ld, lay, F_c, lambda x: _sweep(robot, ld, gravity, lay, c, history, x, F_c)[0]
 
-    frozen = lax.stop_gradient((robot, gravity, c, history, guess))
+    frozen = lax.stop_gradient((robot, gravity, c, history, guess, previous))
 
     def search():
-        robot_, gravity_, c_, history_, guess_ = frozen
+        robot_, gravity_, c_, history_, guess_, previous_ = frozen
 
         def attempt(state):
             a, _, iterations, _ = state
@@ -221,7 +221,8 @@ def _step(robot, gravity, at, c, history, guess, solver: SolverOptions):
                 ok = code == status.SUCCESS
                 return jnp.where(ok, x_new, x), its + info.iterations, jnp.where(ok, info.result, code)
 
-            x, its, code = lax.fori_loop(0, k, stage, (guess_, jnp.int32(0), jnp.int32(status.SUCCESS)))
+            start = jnp.where(a == 0, guess_, previous_)
+            x, its, code = lax.fori_loop(0, k, stage, (start, jnp.int32(0), jnp.int32(status.SUCCESS)))
             return a + 1, x, iterations + its, code
 
         def more(state):
@@ -419,7 +420,7 @@ def _simulate(robot, insertions, load, T, F, C, dt, alpha, gravity, base, solver
         ci = jax.tree.map(lambda a: jnp.where(i == 0, 0.0, a), c)
         history = jax.tree.map(lambda a, b, d: ci.c1 * a + ci.c2 * b + ci.d1 * d, z1, z2, zt1)
         guess = jnp.where(i > 1, 2 * x - x1, x)  # the base wrench extrapolated from the last two steps
-        root, info, (ld, lay, F_c) = _step(robot, gravity, lambda lam: inputs(i, lam), ci, history, guess, solver)
+        root, info, (ld, lay, F_c) = _step(robot, gravity, lambda lam: inputs(i, lam), ci, history, guess, x, solver)
         _, nodes, z = _sweep(robot, ld, gravity, lay, ci, history, root, F_c)
         zt = jax.tree.map(lambda a, b: ci.c0 * a + b, z, history)
         return ((root, x), z, jax.tree.map(lambda a, b: jnp.where(i == 0, a, b), z, z1), zt), (nodes, info)
