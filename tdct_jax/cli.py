@@ -185,6 +185,20 @@ MAX_TIME_STEPS = 100_000
 seconds (or --dt-ms typed in seconds) would run for hours and fill the memory."""
 
 
+def _depth_flags(parser, held: str = "") -> None:
+    """--insertion-mm (one tube) or --insertions-mm (each tube), read by ``_depths_typed``."""
+    depth = parser.add_mutually_exclusive_group()
+    depth.add_argument(
+        "--insertion-mm", type=_finite, help=f"tube insertion depth in mm, for a robot with one tube{held} (default 0)"
+    )
+    depth.add_argument(
+        "--insertions-mm",
+        type=_floats(),
+        metavar="D1,D2,...",
+        help=f"insertion depth of each tube in mm, tube 1 first{held} (default all 0)",
+    )
+
+
 def _parser() -> argparse.ArgumentParser:
     cached = argparse.ArgumentParser(add_help=False)
     cached.add_argument(
@@ -231,16 +245,7 @@ def _parser() -> argparse.ArgumentParser:
         "(e.g. 1:2.5,4:-1); each must be less than the tendon's length from the base to its anchor; "
         "a tendon that would have to push goes slack",
     )
-    insertion = common.add_mutually_exclusive_group()
-    insertion.add_argument(
-        "--insertion-mm", type=_finite, help="tube insertion depth in mm, for a robot with one tube (default 0)"
-    )
-    insertion.add_argument(
-        "--insertions-mm",
-        type=_floats(),
-        metavar="D1,D2,...",
-        help="insertion depth of each tube in mm, tube 1 first (default all 0)",
-    )
+    _depth_flags(common)
     tip = common.add_mutually_exclusive_group()
     tip.add_argument("--tip-mass-g", type=_finite, help="tip mass in grams, hanging under standard gravity (-y)")
     tip.add_argument("--tip-force", type=_floats(3), metavar="FX,FY,FZ", help="tip force in N, world frame")
@@ -442,13 +447,7 @@ def _parser() -> argparse.ArgumentParser:
         help=f"BDF-alpha parameter in [-0.5, 0] (default {ALPHA:g}): 0 damps the fastest modes most, -0.5 not at all "
         "(and lets the base force grow: use -0.3 or more)",
     )
-    depth = m.add_mutually_exclusive_group()
-    depth.add_argument(
-        "--insertion-mm", type=_finite, help="tube insertion depth in mm, for a robot with one tube, held in time (default 0)"
-    )
-    depth.add_argument(
-        "--insertions-mm", type=_floats(), metavar="D1,D2,...", help="insertion depth of each tube in mm, held in time"
-    )
+    _depth_flags(m, ", held in time")
     m.add_argument(
         "--out",
         metavar="DIR",
