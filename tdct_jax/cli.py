@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import csv
 import dataclasses
 import difflib
-import io
 import json
 import math
 import os
@@ -23,7 +21,7 @@ import numpy as np
 
 from . import fields, rod, status
 from .checks import UnitWarning, check_output, interval, target_note
-from .data import _error, _number, _read_text
+from .data import _error, _number
 from .description import CalibrationWarning, Robot
 from .dynamics import ALPHA, simulate
 from .dynamics import check as check_dynamics
@@ -32,6 +30,7 @@ from .ik.starts import STARTS as IK_STARTS
 from .inputs import STANDARD_GRAVITY, Actuation, Loads
 from .mechanics import compliance, compliance_and_solution, compliance_ellipsoid
 from .options import MAX_ITER, STEPS, SolverOptions
+from .recording import _table
 from .scene import read_scene
 from .solve import check_solution, solve
 from .status import ConvergenceError
@@ -1032,31 +1031,15 @@ def read_input_table(path, n_tendons: int) -> InputTable:
     (a missing one 0); blank lines and lines starting with '#' are skipped.
 
     Raises:
-        ValueError: ``path:line: ...`` naming the column, the value and what is allowed: an
-            unreadable file, a missing time column, a first time other than 0, times that do not
+        ValueError: ``path:line: ...`` naming the column, the value and what is allowed: what
+            ``recording._table`` refuses (an unreadable file, rows of another field count, no
+            rows), a missing time column, a first time other than 0, times that do not
             increase, unknown or missing columns (one tension column per tendon), a value that is
             not a finite number, a negative tension.
     """
     path = Path(path)
-    text = _read_text(path, "input table")
-    reader = csv.reader(io.StringIO(text))
-    header, names, rows = 0, None, []
-    try:
-        for fields in reader:
-            if not fields or (len(fields) == 1 and not fields[0].strip()) or fields[0].lstrip().startswith("#"):
-                continue
-            if names is None:
-                header, names = reader.line_num, [f.strip() for f in fields]
-            elif len(fields) != len(names):
-                raise _error(
-                    path, reader.line_num, f"{len(fields)} field(s), but the column line (line {header}) names {len(names)}"
-                )
-            else:
-                rows.append((reader.line_num, fields))
-    except csv.Error as e:
-        raise _error(path, reader.line_num, f"not a CSV file: {e}") from None
-    if names is None:
-        raise _error(path, 0, f"empty: no column line (its first line names the columns, {TIME_COLUMN} first)")
+    table = _table(path, "input table")
+    header, names, rows = table.line, table.names, table.rows
     tensions = [f"tension_{i}_N" for i in range(1, n_tendons + 1)]
     robot = f"the robot has {n_tendons} tendon{'s' * (n_tendons != 1)}"
     allowed = [TIME_COLUMN, *tensions, *TIP_FORCE_COLUMNS]
@@ -1064,8 +1047,6 @@ def read_input_table(path, n_tendons: int) -> InputTable:
         [TIME_COLUMN, *tensions[:1], *(["...", tensions[-1]] if n_tendons > 2 else tensions[1:]), *TIP_FORCE_COLUMNS]
     )
     for name in names:
-        if names.count(name) > 1:
-            raise _error(path, header, f"column {name!r} twice; each column once")
         if name in allowed:
             continue
         numbered = re.fullmatch(r"tension_(\d+)_N", name)
@@ -1084,8 +1065,6 @@ def read_input_table(path, n_tendons: int) -> InputTable:
             header,
             f"no column(s) {', '.join(missing)}: {robot}, one tension column each ({tensions[0]} to {tensions[-1]}, in N)",
         )
-    if not rows:
-        raise _error(path, header, "no rows: the column line is followed by no values")
     index = {name: names.index(name) for name in names}
     values = {name: np.array([_number(path, line, name, f[index[name]]) for line, f in rows]) for name in names}
     lines = [line for line, _ in rows]

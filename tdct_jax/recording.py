@@ -315,8 +315,11 @@ class _Table:
     rows: list
 
 
-def _table(path: Path) -> _Table:
-    text = _read_text(path, "recording")
+def _table(path: Path, what: str = "recording") -> _Table:
+    """A CSV file's columns and rows (``what`` it is, for the message when it cannot be read):
+    blank lines and lines starting with '#' skipped; duplicate column names, rows with another
+    field count, an empty file and no data rows refused with ``path:line``."""
+    text = _read_text(path, what)
     reader = csv.reader(io.StringIO(text))
     line, names, rows = 0, None, []
     try:

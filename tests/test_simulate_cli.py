@@ -79,9 +79,10 @@ BAD_TABLES = [
         "inputs.csv:1: no column(s) tension_1_N: the robot has 1 tendon, one tension column each",
     ),
     ("t_s,tension_1_N\n0,0\n0.01,abc\n", "inputs.csv:3: tension_1_N = 'abc' is not a number"),
-    ("t_s,tension_1_N\n0,0\n0.01\n", "inputs.csv:3: 1 field(s), but the column line (line 1) names 2"),
+    ("t_s,tension_1_N\n0,0\n0.01\n", "inputs.csv:3: row has 1 fields, the column line (line 1) has 2"),
     ("t_s;tension_1_N\n0;0\n", "unknown column 't_s;tension_1_N'"),
-    ("t_s,tension_1_N\n", "inputs.csv:1: no rows"),
+    ("t_s,tension_1_N\n", "inputs.csv:1: no samples"),
+    ("t_s,tension_1_N,t_s\n0,0,0\n", "inputs.csv:1: duplicate column name(s) ['t_s']"),
     ("t_s,tension_1_N\n0,1\n", "inputs.csv: one row, at t = 0: give --duration-s"),
 ]
 BAD_FLAGS = [
