@@ -491,7 +491,8 @@ def fit_motion(robot: Robot, motion: Motion, params=("sections[*].E", "sections[
     """Fits positive robot fields (default: the modulus and the damping of every section) to a
     recorded motion by Levenberg-Marquardt on the tip residuals, with their exact Jacobian
     through the whole simulation (``jax.jacfwd`` in the log of each value). ``options`` go to
-    ``simulate`` (start, alpha, gravity, solver); the start values are the robot's."""
+    ``simulate`` (start, alpha, gravity, solver), which checks the inputs when the fit's program
+    is traced; the start values are the robot's."""
     from . import fields, lm
 
     params = tuple(params)
@@ -505,7 +506,6 @@ def fit_motion(robot: Robot, motion: Motion, params=("sections[*].E", "sections[
     measured = np.asarray(motion.tip, float)
     used = np.all(np.isfinite(measured), axis=1)
     options = {"solver": DEFAULT_SOLVER} | options
-    simulate(robot, motion.dt, tensions=motion.tensions, tip_force=motion.tip_force, **options)  # checks the inputs once
 
     @jax.jit
     def residual_and_jacobian(x):
@@ -518,12 +518,15 @@ def fit_motion(robot: Robot, motion: Motion, params=("sections[*].E", "sections[
         J, (r, code) = jax.jacfwd(tips, has_aux=True)(x)
         return r, J, code
 
+    first = []  # the start's residual, from Levenberg-Marquardt's first evaluation
+
     def evaluate(x):
         r, J, code = residual_and_jacobian(jnp.asarray(x))
+        first[:] = first or [np.asarray(r)]
         return np.asarray(r), np.asarray(J), int(code), None
 
-    r0 = evaluate(np.log(start))[0]
     fit = lm.levenberg_marquardt(evaluate, np.log(start), max_steps=max_steps)
+    r0 = first[0]
     _, se, corr, _ = lm.covariance(fit, fit.residual.size)
     values = {p: float(np.exp(fit.x[i])) for i, p in enumerate(params)}
     return MotionFit(
