@@ -20,15 +20,22 @@ the dynamic equations become ODEs in s, integrated by RK4 like the static ones, 
 with N, M the total force and moment of rod plus tendons (massless tendons: their forces stay
 internal, as in statics). The constitutive relations are the static ones with Kelvin-Voigt
 damping (``Section.damping`` = tau_d): the rod's stress is K (v - e3) + tau_d K v_t, which with
-v_t = c0 v + v_h is the static relation with stiffness (1 + c0 tau_d) K and reference strain
-(e3 - tau_d v_h) / (1 + c0 tau_d), so that the static solver of the strains serves unchanged.
+v_t = c0 (v - e3) + v_h (the history kept of the strain v - e3, not of v, so that no unit vector's
+rounding is multiplied by c0) is the static relation with stiffness (1 + c0 tau_d) K and
+reference strain e3 - tau_d v_h / (1 + c0 tau_d), so that the static solver of the strains
+serves unchanged.
 
 The history lives where the vector field is evaluated: at each RK4 stage of each step (4 points
 a step), so the integration in s keeps its fourth order. The unknowns of each time step are the
-static ones, the base's N(0), M(0) (q = w = 0 at the clamped base), found by Newton's method with
-a jacfwd Jacobian (damped where a step does not lower the residual), warm-started from the
-last step, inside ``lax.custom_root``: derivatives of any
-trajectory output with respect to every input pass through each step's implicit solve.
+static ones, the base's N(0), M(0) (q = w = 0 at the clamped base); with K shooting intervals
+(``solver.intervals``, multiple shooting) also each interior interval's start (R, N, M, q, w),
+and its continuity is K - 1 more residuals. Single shooting's sensitivity grows as exp(k L),
+k L = 1.06 sqrt(steps per first period) for a cantilever: the time step's inertia acts as an
+elastic foundation whose stiffness grows as 1 / dt^2, and K intervals divide k L by K. Newton's
+method (a jacfwd Jacobian, one forward pass for all intervals at once; Levenberg-Marquardt where
+a step does not lower the residual) starts from the last two steps extrapolated, and its root
+passes ``lax.custom_root``: derivatives of any trajectory output with respect to every input go
+through each step's implicit solve.
 """
 
 from __future__ import annotations
@@ -46,7 +53,7 @@ from .description import Robot
 from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
 from .segments import E3, Segment, State, body_strains
-from .so3 import hat, orthonormalize
+from .so3 import cayley, hat, orthonormalize, vee_skew
 from .solve import solve
 from .tree import pytree
 
@@ -117,12 +124,12 @@ def layout(robot: Robot, act: Actuation, load: Loads, gravity, steps: int) -> La
     )
 
 
-def _sweep(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, history, x, F_c):
-    """Integrates base to tip from the scaled base unknowns x (6,) with the history terms
-    ``history``: the stage points' (v_h, u_h, q_h, w_h) (n_steps, 4, 12) and the tip's (q_h, w_h)
-    (6,). Returns the scaled tip residual (6,), the nodes (n_steps + 1 Dyn) and what the history
-    is made of: each stage point's (v, u, q, w) and the tip's (q, w). A point mass m at a step's
-    start (or at L) takes m (g - p_tt) from N, p_tt = R (q_t + w x q) there (stage 1's history)."""
+def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stages, start: Dyn):
+    """RK4 along the steps of ``lay`` from ``start`` with the stage points' history terms
+    ``stages`` (v_h, u_h, q_h, w_h) (n, 4, 12). Returns the end, the nodes (n + 1 Dyn) and what
+    the history is made of: each stage point's (v - e3, u, q, w) (the strain rather than v, so
+    that c0 z + z_h does not cancel a unit vector's rounding times c0). A point mass m at a step's start
+    takes m (g - p_tt) from N, p_tt = R (q_t + w x q) there (stage 1's history)."""
     after = jnp.array([0.5, 0.5, 1.0])
     weights = jnp.array([1.0, 2.0, 2.0, 1.0]) / 6
     f_d = load.distributed_force
@@ -133,24 +140,21 @@ def _sweep(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, history, 
         v_h, u_h, q_h, w_h = z_h[:3], z_h[3:6], z_h[6:9], z_h[9:]
         stiff = Segment(seg.K_se * a, seg.K_bt * a, seg.rho, seg.tau, seg.r, seg.backbone, seg.tilt, seg.dr)
         R = d.y.R
-        # K' (v - v*') with K' = a K, v*' = (e3 - tau_d v_h) / a: the static relation shifted by K' (v*' - e3)
-        bf = R.T @ d.y.N - seg.K_se * (P.damping * v_h + (a - 1.0) * E3)
+        # K' (v - v*') with K' = a K, v*' = e3 - tau_d v_h / a: the static relation shifted by K' (v*' - e3)
+        bf = R.T @ d.y.N - seg.K_se * P.damping * v_h
         bm = R.T @ d.y.M - seg.K_bt * P.damping * u_h
         v, u = body_strains(stiff, bf, bm)
-        v_t, u_t, q_t, w_t = c.c0 * v + v_h, c.c0 * u + u_h, c.c0 * d.q + q_h, c.c0 * d.w + w_h
+        v_t, u_t, q_t, w_t = c.c0 * (v - E3) + v_h, c.c0 * u + u_h, c.c0 * d.q + q_h, c.c0 * d.w + w_h
         dp = R @ v
         dN = -P.rho * gravity - f_d + P.rho * (R @ (q_t + jnp.cross(d.w, d.q)))
         dM = -jnp.cross(dp, d.y.N) + R @ (P.rhoJ * w_t + jnp.cross(d.w, P.rhoJ * d.w))
         dq = v_t - jnp.cross(u, d.q) + jnp.cross(d.w, v)
         dw = u_t - jnp.cross(u, d.w)
-        return Dyn(State(dp, R @ hat(u), dN, dM), dq, dw), jnp.concatenate([v, u, d.q, d.w])
-
-    def acceleration(d: Dyn, q_h):
-        return d.y.R @ (c.c0 * d.q + q_h + jnp.cross(d.w, d.q))
+        return Dyn(State(dp, R @ hat(u), dN, dM), dq, dw), jnp.concatenate([v - E3, u, d.q, d.w])
 
     def step(d: Dyn, k):
         P, s0, h, dN, dM, m, z_h = k
-        d = d._replace(y=d.y._replace(N=d.y.N + dN + m * acceleration(d, z_h[0, 6:9]), M=d.y.M + dM))
+        d = d._replace(y=d.y._replace(N=d.y.N + dN + m * _acceleration(c, d, z_h[0, 6:9]), M=d.y.M + dM))
         k1, z1 = field(P, s0, z_h[0], d)
         k2, z2 = field(P, s0 + h / 2, z_h[1], jax.tree.map(lambda a, b: a + h * after[0] * b, d, k1))
         k3, z3 = field(P, s0 + h / 2, z_h[2], jax.tree.map(lambda a, b: a + h * after[1] * b, d, k2))
@@ -160,15 +164,146 @@ def _sweep(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, history, 
         new = new._replace(y=new.y._replace(R=orthonormalize(new.y.R)))
         return new, (new, jnp.stack([z1, z2, z3, z4]))
 
-    L = robot.length
-    start = Dyn(State(jnp.zeros(3), jnp.eye(3), x[:3] * F_c, x[3:6] * F_c * L), jnp.zeros(3), jnp.zeros(3))
-    stages, tip = history
     end, (nodes, z) = lax.scan(step, start, (lay.P, lay.s0, lay.h, lay.dN, lay.dM, lay.mass, stages))
-    nodes = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), start, nodes)
-    dN_L, dM_L, m_L = lay.tip
-    N_L, M_L = end.y.N + dN_L + m_L * acceleration(end, tip[:3]), end.y.M + dM_L
-    res = jnp.concatenate([(N_L - load.tip_force) / F_c, (M_L - load.tip_moment) / (F_c * L)])
-    return res, nodes, (z, jnp.concatenate([end.q, end.w]))
+    return end, jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), start, nodes), z
+
+
+def _acceleration(c: Scheme, d: Dyn, q_h):
+    """p_tt = R (q_t + w x q) at the state d, q_t = c0 q + q_h."""
+    return d.y.R @ (c.c0 * d.q + q_h + jnp.cross(d.w, d.q))
+
+
+N_START = 15
+"""An interior shooting interval's start unknowns: its rotation (3), then N, M, q and w (3 each)."""
+
+
+class Unknowns(NamedTuple):
+    """One time step's unknowns: the scaled base wrench x (6,) (N(0) / F_c, M(0) / (F_c L)), and
+    with K shooting intervals (``solver.intervals``) each interior start's rotation R (K - 1, 3, 3)
+    and its (N, M, q, w) divided by ``_scale`` (K - 1, 12)."""
+
+    x: jax.Array
+    R: jax.Array
+    z: jax.Array
+
+
+def _scale(F_c, L, dt):
+    """The units of (N, M, q, w) in the unknowns and the residual: F_c, F_c L, L / dt, 1 / dt."""
+    return jnp.repeat(jnp.stack([F_c, F_c * L, L / dt, 1.0 / dt]), 3)
+
+
+class Problem(NamedTuple):
+    """One time step's boundary-value problem at given inputs: the robot, loads, gravity, layout,
+    scheme, history ((n_steps, 4, 12) stage points, (6,) tip), force scale F_c, ``_scale``, and K."""
+
+    robot: Robot
+    load: Loads
+    gravity: jax.Array
+    lay: Layout
+    c: Scheme
+    history: tuple
+    F_c: jax.Array
+    S: jax.Array
+    K: int
+
+    def run(self, R, y):
+        """The K intervals integrated side by side from their starts, rotations R (K, 3, 3) and
+        (N, M, q, w) y (K, 12), each from p = 0: ends, nodes (K, n_steps / K + 1) and stage values."""
+        K = self.K
+
+        def split(a):
+            return a.reshape(K, -1, *a.shape[1:])
+
+        start = Dyn(State(jnp.zeros((K, 3)), R, y[:, :3], y[:, 3:6]), y[:, 6:9], y[:, 9:])
+        per = jax.tree.map(split, self.lay._replace(tip=()))
+        integrate = jax.vmap(lambda lay, stages, d: _integrate(self.robot, self.load, self.gravity, lay, self.c, stages, d))
+        return integrate(per, split(self.history[0]), start)
+
+    def starts(self, u: Unknowns):
+        """Every interval's start rotation (K, 3, 3) and (N, M, q, w) (K, 12); the base's R = I, q = w = 0."""
+        R = jnp.concatenate([jnp.eye(3)[None], u.R])
+        return R, jnp.concatenate([jnp.concatenate([u.x, jnp.zeros(6)])[None], u.z]) * self.S[None]
+
+    def closing(self, ends: Dyn, R_next):
+        """Each interval's end against the next start, rotation vector of R_end R_next^T and
+        (N, M, q, w) / S (K, 15); and the scaled tip residual (6,) at the last end."""
+        dN_L, dM_L, m_L = self.lay.tip
+        last = jax.tree.map(lambda a: a[-1], ends)
+        N_L = last.y.N + dN_L + m_L * _acceleration(self.c, last, self.history[1][:3])
+        M_L = last.y.M + dM_L
+        F_c, L = self.F_c, self.robot.length
+        tip = jnp.concatenate([(N_L - self.load.tip_force) / F_c, (M_L - self.load.tip_moment) / (F_c * L)])
+        y = jnp.concatenate([ends.y.N, ends.y.M, ends.q, ends.w], -1) / self.S[None]
+        return jnp.concatenate([vee_skew(ends.y.R @ jnp.swapaxes(R_next, -1, -2)), y], -1), tip
+
+    def residual(self, u: Unknowns):
+        """Continuity at every interior start ((K - 1) 15, flattened), then the tip's (6,); and
+        the run (ends, nodes, stage values)."""
+        out = self.run(*self.starts(u))
+        cont, tip = self.closing(out[0], jnp.concatenate([u.R, jnp.eye(3)[None]]))
+        gap = cont[:-1] - jnp.concatenate([jnp.zeros((self.K - 1, 3)), u.z], -1)
+        return jnp.concatenate([gap.reshape(-1), tip]), out
+
+    def linearize(self, u: Unknowns):
+        """The residual and its Jacobian in (x, each interior's rotation (I + w^) R, then z): one
+        forward pass perturbing every interval's start alike (each end depends on its own start
+        only), its blocks set into the dense matrix."""
+        K = self.K
+        R, y = self.starts(u)
+        R_next = jnp.concatenate([u.R, jnp.eye(3)[None]])
+        base = slice(3, 9)  # the base wrench among a start's perturbations
+        E = jnp.eye(N_START)[:, base] if K == 1 else jnp.eye(N_START)
+
+        def ends(w):
+            v = E @ w
+            out = self.closing(self.run(R + hat(v[:3])[None] @ R, y + (v[3:] * self.S)[None])[0], R_next)
+            return out, out
+
+        (G, T), (cont, tip) = jax.jacfwd(ends, has_aux=True)(jnp.zeros(E.shape[1]))
+        n = 6 + N_START * (K - 1)
+
+        def cols(k, block):
+            return (
+                (slice(0, 6), block[..., base] if K > 1 else block)
+                if k == 0
+                else (slice(6 + N_START * (k - 1), 6 + N_START * k), block)
+            )
+
+        J = jnp.zeros((n, n))
+        for k in range(K - 1):
+            rows = slice(N_START * k, N_START * (k + 1))
+            c_k, b_k = cols(k, G[k])
+            J = J.at[rows, c_k].set(b_k).at[rows, cols(k + 1, None)[0]].set(-jnp.eye(N_START))
+        c_K, b_K = cols(K - 1, T)
+        J = J.at[n - 6 :, c_K].set(b_K)
+        gap = cont[:-1] - jnp.concatenate([jnp.zeros((K - 1, 3)), u.z], -1)
+        return jnp.concatenate([gap.reshape(-1), tip]), J
+
+
+def _update(u: Unknowns, r, J, mu):
+    """The next point of ``Problem.linearize``'s system: Newton's step while mu is at most
+    ``newton.MU_START`` (every step so far lowered the residual), else Levenberg-Marquardt's in
+    Marquardt's scale (the columns' norms differ a thousandfold between rotations and velocities,
+    and the smallest singular values are far below MU_START); rotations move by the Cayley map."""
+    JJ = J.T @ J
+    damped = -jnp.linalg.solve(JJ + mu * jnp.diag(jnp.diag(JJ)), J.T @ r)
+    d = jnp.where(mu <= newton.MU_START, -jnp.linalg.solve(J, r), damped)
+    inner = d[6:].reshape(-1, N_START)
+    return Unknowns(u.x + d[:6], cayley(inner[:, :3]) @ u.R, u.z + inner[:, 3:])
+
+
+def _extrapolate(u: Unknowns, before: Unknowns) -> Unknowns:
+    """The next step's guess from the last two roots, linear in each unknown (rotations by their
+    relative rotation)."""
+    R = jax.vmap(orthonormalize)(u.R @ jnp.swapaxes(before.R, -1, -2) @ u.R)
+    return Unknowns(2 * u.x - before.x, R, 2 * u.z - before.z)
+
+
+def _at_rotations(v, R_ref) -> Unknowns:
+    """The Unknowns of a vector (x, then each interior's Cayley vector of R R_ref^T and z): the
+    coordinates in which ``lax.custom_root`` differentiates the root."""
+    inner = v[6:].reshape(-1, N_START)
+    return Unknowns(v[:6], cayley(inner[:, :3]) @ R_ref, inner[:, 3:])
 
 
 class StepInfo(NamedTuple):
@@ -177,80 +312,62 @@ class StepInfo(NamedTuple):
     residual_norm: jax.Array
 
 
-def _newton(f, x0, solver: SolverOptions) -> tuple:
-    """``newton.newton`` (Levenberg-Marquardt-damped, so that a sudden input does not throw the
-    first iterate far off) on the residual f: the point and its StepInfo."""
-    x, r, _, steps, code = newton.newton(lambda x: (f(x), ()), x0, solver.tol, solver.max_iter)
+def _newton(problem: Problem, u0: Unknowns, solver: SolverOptions):
+    """``newton.damped`` (Levenberg-Marquardt, so that a sudden input does not throw the first
+    iterate far off) on the problem: the point, Newton steps and the status code."""
+    u, r, _, steps, code = newton.damped(problem.linearize, _update, u0, solver.tol, solver.max_iter)
     code = jnp.where(code == status.SUCCESS, code, jnp.where(jnp.all(jnp.isfinite(r)), status.NEWTON_LIMIT, status.NONFINITE))
-    return x, StepInfo(jnp.asarray(steps, jnp.int32), code.astype(jnp.int32), jnp.max(jnp.abs(r)))
+    return u, jnp.asarray(steps, jnp.int32), code.astype(jnp.int32)
 
 
-def _step(robot, gravity, at, c, history, guess, previous, solver: SolverOptions):
-    """The base unknowns of one time step, ``at(lam)`` its (actuation, loads) with the step's
-    change of inputs scaled by lam (1: the step's own). Newton from ``guess``; where it fails, load
-    continuation as in statics from the last step's root ``previous``: ``solver.stages`` ramps of
-    equal stages in turn, each stage from the last one's root. That search runs without derivatives; the root is then taken once more by
-    ``lax.custom_root`` at the full inputs (one residual evaluation when the search converged), so
-    derivatives of anything downstream go through each step's implicit solve.
+def _step(problem_at, guess: Unknowns, previous: Unknowns, solver: SolverOptions):
+    """One time step's root, ``problem_at(lam, frozen)`` its Problem with the step's change of
+    inputs scaled by lam (1: the step's own), its inputs without derivatives where ``frozen``. Newton from ``guess``; where it fails, load continuation
+    as in statics from the last step's root ``previous``: ``solver.stages`` ramps of equal stages
+    in turn, each stage from the last one's root. That search runs without derivatives; its root
+    then passes ``lax.custom_root`` at the full inputs, so derivatives of anything downstream go
+    through each step's implicit solve (by the dense Jacobian in ``_at_rotations``' coordinates).
 
-    Returns the root, the StepInfo (Newton steps of the search, the code of the root) and the
-    step's (layout, force scale)."""
+    Returns the root, the StepInfo (Newton steps and code of the search, the residual of the
+    run at the root: the same to rounding) and that run (ends, nodes, stage values)."""
+    frozen = lax.stop_gradient((guess, previous))
 
-    def residual_at(lam):
-        act, ld = at(lam)
-        F_c = rod.force_scale(robot, act, ld, gravity)
-        lay = layout(robot, act, ld, gravity, solver.steps)
-        return ld, lay, F_c, lambda x: _sweep(robot, ld, gravity, lay, c, history, x, F_c)[0]
+    def attempt(state):
+        a, _, iterations, _ = state
+        k = jnp.asarray(solver.stages)[a]
 
-    frozen = lax.stop_gradient((robot, gravity, c, history, guess, previous))
+        def stage(j, carry):
+            u, its, code = carry
+            problem = problem_at((j + 1) / k, frozen=True)
+            u_new, steps, code_new = _newton(problem, u, solver)
+            ok = code == status.SUCCESS
+            return jax.tree.map(lambda n, o: jnp.where(ok, n, o), u_new, u), its + steps, jnp.where(ok, code_new, code)
 
-    def search():
-        robot_, gravity_, c_, history_, guess_, previous_ = frozen
+        start = jax.tree.map(lambda g, p: jnp.where(a == 0, g, p), *frozen)
+        u, its, code = lax.fori_loop(0, k, stage, (start, jnp.int32(0), jnp.int32(status.SUCCESS)))
+        return a + 1, u, iterations + its, code
 
-        def attempt(state):
-            a, _, iterations, _ = state
-            k = jnp.asarray(solver.stages)[a]
+    def more(state):
+        a, _, _, code = state
+        return (code != status.SUCCESS) & (a < len(solver.stages))
 
-            def stage(j, carry):
-                x, its, code = carry
-                act, ld = at((j + 1) / k)
-                act, ld = lax.stop_gradient((act, ld))
-                F_c = rod.force_scale(robot_, act, ld, gravity_)
-                lay = layout(robot_, act, ld, gravity_, solver.steps)
-                x_new, info = _newton(lambda x: _sweep(robot_, ld, gravity_, lay, c_, history_, x, F_c)[0], x, solver)
-                ok = code == status.SUCCESS
-                return jnp.where(ok, x_new, x), its + info.iterations, jnp.where(ok, info.result, code)
+    first = (jnp.int32(0), frozen[0], jnp.int32(0), jnp.int32(status.NEWTON_LIMIT))
+    _, found, iterations, code = lax.while_loop(more, attempt, first)
 
-            start = jnp.where(a == 0, guess_, previous_)
-            x, its, code = lax.fori_loop(0, k, stage, (start, jnp.int32(0), jnp.int32(status.SUCCESS)))
-            return a + 1, x, iterations + its, code
+    problem = problem_at(1.0)
+    R_ref = found.R
 
-        def more(state):
-            a, _, _, code = state
-            return (code != status.SUCCESS) & (a < len(solver.stages))
-
-        first = (jnp.int32(0), guess_, jnp.int32(0), jnp.int32(status.NEWTON_LIMIT))
-        _, x, iterations, _ = lax.while_loop(more, attempt, first)
-        return x, iterations
-
-    found, iterations = search()
-    ld, lay, F_c, residual = residual_at(1.0)
-
-    def checked(f, x0):
-        norm = jnp.max(jnp.abs(f(x0)))
-        x, info = lax.cond(
-            norm <= solver.tol,
-            lambda: (x0, StepInfo(jnp.int32(0), jnp.int32(status.SUCCESS), norm)),
-            lambda: _newton(f, x0, solver),
-        )
-        return x, tuple(jnp.asarray(a, float) for a in info)  # floats: custom_root differentiates its aux
+    def residual(v):
+        return problem.residual(_at_rotations(v, R_ref))[0]
 
     def tangent_solve(g, y):
         return jnp.linalg.solve(jax.jacfwd(g)(y), y)
 
-    x, info = lax.custom_root(residual, found, checked, tangent_solve, has_aux=True)
-    info = lax.stop_gradient(info)
-    return x, StepInfo(iterations + info[0].astype(jnp.int32), info[1].astype(jnp.int32), info[2]), (ld, lay, F_c)
+    v = jnp.concatenate([found.x, jnp.concatenate([jnp.zeros((found.z.shape[0], 3)), found.z], -1).reshape(-1)])
+    u = _at_rotations(lax.custom_root(residual, v, lambda f, v: v, tangent_solve), R_ref)
+    r, out = problem.residual(u)
+    norm = lax.stop_gradient(jnp.max(jnp.abs(r)))
+    return u, StepInfo(iterations, code, norm), out
 
 
 @pytree
@@ -325,8 +442,9 @@ def check(robot: Robot, load: Loads, solver: SolverOptions) -> None:
         raise ValueError("sections[*].friction: tendon friction is not simulated yet; give none")
     if load.scene is not None:
         raise ValueError("scene: contact is not simulated yet")
-    if solver.transition != "balanced" or solver.tendon_model != "exact" or solver.intervals != 1:
-        raise ValueError("solver: simulate uses the 'balanced' transition, 'exact' tendons and single shooting (intervals = 1)")
+    if solver.transition != "balanced" or solver.tendon_model != "exact":
+        raise ValueError("solver: simulate uses the 'balanced' transition and 'exact' tendons")
+    rod.check_intervals(robot, load, solver)
 
 
 def simulate(
@@ -405,9 +523,12 @@ def simulate(
 def _simulate(robot, insertions, load, T, F, C, dt, alpha, gravity, base, solver, static_start):
     """``simulate``'s compiled part: one scan over the time rows, each an implicit step (the first,
     with ``static_start``, the static root: every coefficient zero), so that the root and the
-    sweep are compiled once; ``base``: the base wrench (N(0), M(0)) the first Newton starts from."""
+    sweep are compiled once; ``base``: the base wrench (N(0), M(0)) the first Newton starts from,
+    the interior starts (multiple shooting) from one static pass from it."""
+    K = solver.intervals
     n_nodes = rod.n_intervals(robot, load) * solver.steps
     c = scheme(dt, alpha)
+    L = robot.length
 
     def inputs(i, lam=1.0):
         """Row i's inputs, or with lam < 1 those of row i - 1 moved lam of the way to row i."""
@@ -415,23 +536,40 @@ def _simulate(robot, insertions, load, T, F, C, dt, alpha, gravity, base, solver
         T_i, F_i, C_i = (a[j] + lam * (a[i] - a[j]) for a in (T, F, C))
         return Actuation._rebuild(T_i, insertions, jnp.zeros(0), ()), load.with_tip(F_i, C_i)
 
+    def problem(i, c_i, history, lam=1.0, frozen=False):
+        act, ld = inputs(i, lam)
+        parts = (robot, act, ld, gravity, c_i, history)
+        robot_, act, ld, gravity_, c_i, history = lax.stop_gradient(parts) if frozen else parts
+        F_c = rod.force_scale(robot_, act, ld, gravity_)
+        lay = layout(robot_, act, ld, gravity_, solver.steps)
+        return Problem(robot_, ld, gravity_, lay, c_i, history, F_c, _scale(F_c, L, dt), K)
+
     def advance(carry, i):
-        (x, x1), z1, z2, zt1 = carry
+        (u, before), z1, z2, zt1 = carry
         ci = jax.tree.map(lambda a: jnp.where(i == 0, 0.0, a), c)
         history = jax.tree.map(lambda a, b, d: ci.c1 * a + ci.c2 * b + ci.d1 * d, z1, z2, zt1)
-        guess = jnp.where(i > 1, 2 * x - x1, x)  # the base wrench extrapolated from the last two steps
-        root, info, (ld, lay, F_c) = _step(robot, gravity, lambda lam: inputs(i, lam), ci, history, guess, x, solver)
-        _, nodes, z = _sweep(robot, ld, gravity, lay, ci, history, root, F_c)
+        guess = jax.tree.map(lambda e, a: jnp.where(i > 1, e, a), _extrapolate(u, before), u)
+        root, info, (ends, nodes, z) = _step(lambda lam, frozen=False: problem(i, ci, history, lam, frozen), guess, u, solver)
+        offsets = jnp.cumsum(ends.y.p, 0) - ends.y.p  # each interval ran from p = 0
+        nodes = nodes._replace(y=nodes.y._replace(p=nodes.y.p + offsets[:, None]))
+        nodes = jax.tree.map(lambda a: jnp.concatenate([a[:, :-1].reshape(-1, *a.shape[2:]), a[-1, -1:]]), nodes)
+        z = (z.reshape(n_nodes, 4, 12), jnp.concatenate([ends.q[-1], ends.w[-1]]))
         zt = jax.tree.map(lambda a, b: ci.c0 * a + b, z, history)
-        return ((root, x), z, jax.tree.map(lambda a, b: jnp.where(i == 0, a, b), z, z1), zt), (nodes, info)
+        return ((root, u), z, jax.tree.map(lambda a, b: jnp.where(i == 0, a, b), z, z1), zt), (nodes, info)
 
     act0, load0 = inputs(0)
     F_c0 = rod.force_scale(robot, act0, load0, gravity)
-    x0 = jnp.concatenate([base[:3], base[3:] / robot.length]) / F_c0
-    rest = (jnp.broadcast_to(jnp.concatenate([E3, jnp.zeros(9)]), (n_nodes, 4, 12)), jnp.zeros(6))
-    start = ((x0, x0), rest, rest, jax.tree.map(jnp.zeros_like, rest))
+    x0 = jnp.concatenate([base[:3], base[3:] / L]) / F_c0
+    rest = (jnp.zeros((n_nodes, 4, 12)), jnp.zeros(6))
+    lay0 = layout(robot, act0, load0, gravity, solver.steps)
+    first = Dyn(State(jnp.zeros(3), jnp.eye(3), base[:3], base[3:]), jnp.zeros(3), jnp.zeros(3))
+    y = _integrate(robot, load0, gravity, lay0._replace(tip=()), STATIC, rest[0], first)[1]
+    inner = jax.tree.map(lambda a: a[n_nodes // K : n_nodes : n_nodes // K], y)
+    z0 = jnp.concatenate([inner.y.N, inner.y.M, inner.q, inner.w], -1) / _scale(F_c0, L, dt)[None]
+    u0 = Unknowns(x0, inner.y.R, z0)
+    start = ((u0, u0), rest, rest, jax.tree.map(jnp.zeros_like, rest))
     _, (nodes, info) = lax.scan(advance, start, jnp.arange(0 if static_start else 1, T.shape[0]))
-    s = jnp.concatenate([layout(robot, act0, load0, gravity, solver.steps).s0, robot.length[None]])
+    s = jnp.concatenate([lay0.s0, L[None]])
     if not static_start:  # the straight, unstrained robot at rest
         zeros = jnp.zeros((s.size, 3))
         straight = Dyn(State(s[:, None] * E3, jnp.broadcast_to(jnp.eye(3), (s.size, 3, 3)), zeros, zeros), zeros, zeros)

@@ -43,7 +43,7 @@ import jax.numpy as jnp
 from . import rod, shooting
 from .newton import continuation, damped
 from .segments import State
-from .so3 import hat, orthonormalize
+from .so3 import cayley, hat, orthonormalize, vee_skew
 
 N_START = 9
 """Perturbations of an interval's start: rotation (3), scaled N (3), scaled M (3) (then the n_d
@@ -91,19 +91,6 @@ def check(robot, load, solver) -> None:
             "multiple shooting needs the 'balanced' transition and the 'exact' tendon model; "
             "use intervals = 1 for the paper's variants"
         )
-
-
-def _vee_skew(Q):
-    """vee of the skew part of Q (..., 3, 3): the rotation vector of Q to first order."""
-    return 0.5 * jnp.stack([Q[..., 2, 1] - Q[..., 1, 2], Q[..., 0, 2] - Q[..., 2, 0], Q[..., 1, 0] - Q[..., 0, 1]], -1)
-
-
-def _cayley(w):
-    """The Cayley map (I - w^/2)^-1 (I + w^/2) of rotation vectors w (..., 3): exactly a rotation,
-    equal to exp(w^) to first order."""
-    W = hat(w)
-    c = 4 / (4 + jnp.sum(w**2, -1))[..., None, None]
-    return jnp.broadcast_to(jnp.eye(3), W.shape) + c * (W + W @ W / 2)
 
 
 def _starts(u: Unknowns, F_c, L):
@@ -160,7 +147,7 @@ def _residual(robot, load, u: Unknowns, r: Run, F_c):
     """Continuity at every interior start (K - 1, 9), flattened, then the closing residual (6 + n_d,)."""
     ends, L = r.ends, robot.length
     cont = jnp.concatenate(
-        [_vee_skew(ends.R[:-1] @ jnp.swapaxes(u.R, -1, -2)), ends.N[:-1] / F_c - u.n, ends.M[:-1] / (F_c * L) - u.m], -1
+        [vee_skew(ends.R[:-1] @ jnp.swapaxes(u.R, -1, -2)), ends.N[:-1] / F_c - u.n, ends.M[:-1] / (F_c * L) - u.m], -1
     )
     return jnp.concatenate([cont.reshape(-1), _closing_at(robot, load, u, r, F_c)[0]])
 
@@ -184,7 +171,7 @@ def linearize(robot, act, load, gravity, solver, u: Unknowns, F_c):
         starts = (hat(w[:3])[None] @ R + R, N + F_c * w[None, 3:6], M + F_c * L * w[None, 6:9])
         r = run(robot, act, load, gravity, solver, x, starts, F_c)
         y = r.ends
-        z = jnp.concatenate([_vee_skew(y.R @ jnp.swapaxes(R_next, -1, -2)), y.N / F_c, y.M / (F_c * L)], -1)
+        z = jnp.concatenate([vee_skew(y.R @ jnp.swapaxes(R_next, -1, -2)), y.N / F_c, y.M / (F_c * L)], -1)
         return (z, y.p, r.lengths, y.R[-1]), r
 
     (Z, P, Lj, D), r = jax.jacfwd(ends, has_aux=True)(jnp.zeros(N_START + n_d))
@@ -234,7 +221,7 @@ def _step(u: Unknowns, r, blocks: Blocks, mu):
     J, rhs, a, B = _reduce(blocks, r)
     dx = -jnp.linalg.solve(J.T @ J + mu * jnp.eye(J.shape[0]), J.T @ rhs)
     d = a[1:] + B[1:] @ dx
-    return Unknowns(u.x + dx, _cayley(d[:, :3]) @ u.R, u.n + d[:, 3:6], u.m + d[:, 6:N_START])
+    return Unknowns(u.x + dx, cayley(d[:, :3]) @ u.R, u.n + d[:, 3:6], u.m + d[:, 6:N_START])
 
 
 def jacobians(blocks: Blocks):

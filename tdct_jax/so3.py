@@ -23,3 +23,16 @@ def rotation_columns(dR, R):
     """Columns vee(dR_k R^T) of the world-frame rotation vectors of the derivatives dR (3, 3, k) of R."""
     A = jnp.einsum("ijk,lj->ilk", dR, R)
     return jnp.stack([A[2, 1], A[0, 2], A[1, 0]])
+
+
+def vee_skew(Q):
+    """vee of the skew part of Q (..., 3, 3): the rotation vector of Q to first order."""
+    return 0.5 * jnp.stack([Q[..., 2, 1] - Q[..., 1, 2], Q[..., 0, 2] - Q[..., 2, 0], Q[..., 1, 0] - Q[..., 0, 1]], -1)
+
+
+def cayley(w):
+    """The Cayley map (I - w^/2)^-1 (I + w^/2) of rotation vectors w (..., 3): exactly a rotation,
+    equal to exp(w^) to first order."""
+    W = hat(w)
+    c = 4 / (4 + jnp.sum(w**2, -1))[..., None, None]
+    return jnp.broadcast_to(jnp.eye(3), W.shape) + c * (W + W @ W / 2)
