@@ -4,15 +4,16 @@ pulled in 0.1 s, simulated for 0.3 s, on the paper robot and on a three-segment 
 For each robot, the tip along time is computed at a fine reference step (0.25 ms) and at coarser
 steps (0.5 to 10 ms, every one a multiple of the reference's, so the trajectories share their
 times); the largest step whose tip stays within 0.1 mm of the reference at every common time is
-the working step. There: compile time (first call less a warm one), the warm wall time per time
-step (median of warm calls of the whole ``simulate``, the start's static solve included), the
-real-time factor (simulated time over wall time) and the mean Newton steps per time step; the
-same with 10 RK4 steps per interval instead of 20, with its own distance to the reference, and
-with Newton's tolerance loosened from 1e-10 to 1e-6; 40 RK4 steps at the working step, for the
-spatial error of 20; and what bounds the speed: the cost of one time step's primal shooting pass
-and of its Jacobian pass (``jacfwd`` in the six base unknowns), each timed alone, against the
-measured step (a step takes ``iterations + 1`` Jacobian passes and at least one primal pass, for
-its nodes). Last, ``jax.vmap`` of ``simulate`` over tension amplitudes (batches of 8 and 64, the
+the working step. Every run uses ``simulate``'s default solver (``dynamics.default_solver``:
+four shooting intervals where they divide the RK4 steps). There: compile time (first call less a
+warm one), the warm wall time per time step (median of warm calls of the whole ``simulate``, the
+start's static solve included), the real-time factor (simulated time over wall time) and the
+mean Newton steps per time step; the same with 10 RK4 steps per interval instead of 20, with its
+own distance to the reference, with Newton's tolerance loosened from 1e-10 to 1e-6, and with
+single shooting (one interval); 40 RK4 steps at the working step, for the spatial error of 20;
+and what bounds the speed: the cost of one time step's primal shooting pass and of its Jacobian
+pass (``Problem.linearize``), each timed alone, against the measured step (a step takes
+``iterations + 1`` Jacobian passes and one primal pass, for its nodes). Last, ``jax.vmap`` of ``simulate`` over tension amplitudes (batches of 8 and 64, the
 paper robot at its working step): the summed real-time factor of the batch.
 
 The robots (no point masses):
@@ -55,7 +56,7 @@ from tdct_jax.inputs import STANDARD_GRAVITY, gravity_vector
 DURATION, RAMP, AMPLITUDE = 0.3, 0.1, 3.0  # [s], [s], [N]
 REFERENCE_MS = 0.25
 STEPS_MS = (0.5, 1.0, 2.0, 3.0, 4.0, 5.0, 10.0)
-LOOSE = tdct.SolverOptions(steps=20, tol=1e-6)
+LOOSE_TOL = 1e-6
 """Newton's tolerance loosened from 1e-10 (scaled residual): how many Newton steps it saves."""
 TOLERANCE_M = 1e-4
 """Largest distance of the tip from the reference's, at any common time, for a step to count."""
@@ -132,6 +133,7 @@ def row(name, dt, solver, traj, first, warm, error):
         robot=name,
         dt_ms=1e3 * dt,
         rk4_steps=solver.steps,
+        intervals=solver.intervals,
         newton_tol=float(solver.tol),
         time_steps=rows - 1,
         converged=bool(traj.converged),
@@ -147,7 +149,7 @@ def row(name, dt, solver, traj, first, warm, error):
     )
     err = "" if error is None else f", tip within {1e6 * error:8.1f} um"
     print(
-        f"{name:32s} dt {1e3 * dt:5.2f} ms, {solver.steps} RK4, tol {float(solver.tol):.0e}: {out['ms_per_time_step']:6.2f} ms/step, "
+        f"{name:32s} dt {1e3 * dt:5.2f} ms, {solver.steps} RK4, K {solver.intervals}, tol {float(solver.tol):.0e}: {out['ms_per_time_step']:6.2f} ms/step, "
         f"{out['real_time_factor']:.3f}x real time, {out['mean_newton_steps']:.2f} Newton steps, "
         f"compile {out['compile_s']:.1f} s{err}{'' if out['converged'] else ', NOT CONVERGED'}",
         flush=True,
@@ -162,9 +164,10 @@ robot's and the layout's pytrees flattened in Python) is not timed as the pass's
 
 def anatomy(robot, insertions, dt, solver, newton_steps, ms_per_step, repeats=20) -> dict:
     """One time step's shooting passes timed alone, mid-pull (half the amplitude on tendon 1):
-    the primal pass (base to tip, the residual) and the Jacobian pass (``jacfwd`` of the residual
-    in the six base unknowns), each run PASSES times in a compiled loop, each pass's unknowns
-    depending on the last pass's output so that none is hoisted, with ``dynamics._sweep``'s
+    the primal pass (base to tip, the residual) and the Jacobian pass (``Problem.linearize``: one
+    ``jacfwd`` pass in the six base unknowns, or with K > 1 intervals in each start's 15), each
+    run PASSES times in a compiled loop, each pass's unknowns
+    depending on the last pass's output so that none is hoisted, with ``dynamics.Problem``'s
     arguments as the loop's arguments (as in ``simulate``'s scan); and a warm static
     ``tdct.solve`` for scale. The time step they predict: ``newton_steps + 1`` Jacobian passes
     and one primal pass (its nodes; the step may take more), against the measured
@@ -175,15 +178,23 @@ def anatomy(robot, insertions, dt, solver, newton_steps, ms_per_step, repeats=20
     g = jnp.asarray(gravity_vector(STANDARD_GRAVITY))
     c = dynamics.scheme(dt)
     lay = dynamics.layout(robot, act, load, g, solver.steps)
-    # the history terms of a robot at rest for the last two steps, built as simulate's scan builds them
-    rest = (jnp.broadcast_to(jnp.concatenate([dynamics.E3, jnp.zeros(9)]), (lay.s0.size, 4, 12)), jnp.zeros(6))
-    history = jax.tree.map(lambda z: (c.c1 + c.c2) * z, rest)
+    history = (jnp.zeros((lay.s0.size, 4, 12)), jnp.zeros(6))  # a robot at rest: no strain rate, no velocity
     F_c = rod.force_scale(robot, act, load, g)
     base = tdct.solve(robot, act, solver=solver).base_wrench
     x = jnp.concatenate([base[:3], base[3:] / robot.length]) / F_c
+    K = solver.intervals
 
-    def residual(x, robot, load, lay, c, history, F_c):
-        return dynamics._sweep(robot, load, g, lay, c, history, x, F_c)[0]
+    def problem(robot, load, lay, c, history, F_c):
+        return dynamics.Problem(robot, load, g, lay, c, history, F_c, dynamics._scale(F_c, robot.length, dt), K)
+
+    def unknowns(x):  # the interior starts' values do not change a pass's cost
+        return dynamics.Unknowns(x, jnp.broadcast_to(jnp.eye(3), (K - 1, 3, 3)), jnp.zeros((K - 1, 12)))
+
+    def residual(x, *args):
+        return problem(*args).residual(unknowns(x))[0]
+
+    def linearized(x, *args):
+        return problem(*args).linearize(unknowns(x))[1]
 
     def looped(f):
         @jax.jit
@@ -193,7 +204,7 @@ def anatomy(robot, insertions, dt, solver, newton_steps, ms_per_step, repeats=20
         return passes
 
     args = (x, robot, load, lay, c, history, F_c)
-    primal, jacobian = looped(residual), looped(jax.jacfwd(residual))
+    primal, jacobian = looped(residual), looped(linearized)
     out = {}
     for name, f, k in (
         ("primal_pass", lambda: primal(*args), PASSES),
@@ -276,9 +287,10 @@ def main() -> None:
     args = parser.parse_args()
     load_start = os.getloadavg()
     print(f"load average {load_start}", flush=True)
-    fine, coarse, rows_out = tdct.SolverOptions(steps=20), tdct.SolverOptions(steps=10), []
-    summary, batches, anatomies = {}, [], {}
+    rows_out, summary, batches, anatomies = [], {}, [], {}
     for name, (robot, ins) in robots(args.quick).items():
+        fine, coarse = (dynamics.default_solver(robot, tdct.Loads(), steps=k) for k in (20, 10))
+        loose = dynamics.default_solver(robot, tdct.Loads(), tol=LOOSE_TOL)
         if args.quick:  # one compiled program: 21 rows at 5 ms, then the same 21 rows at 2.5 ms
             dt, rows = 5e-3, 21
             traj, first, warm = timed(robot, ins, dt, rows, fine, 3)
@@ -309,7 +321,8 @@ def main() -> None:
         at_best = row(name, dt, fine, traj, first, warm, distance(traj, dt, ref, ref_dt))
         runs[best][3].update(at_best, working=True)  # its row, now with every warm call
         other = {}  # option -> (trajectory, its row)
-        for key, solver in (("10", coarse), ("40", tdct.SolverOptions(steps=40)), ("tol", LOOSE)):
+        options = (("10", coarse), ("40", dynamics.default_solver(robot, tdct.Loads(), steps=40)), ("tol", loose))
+        for key, solver in (*options, ("single", tdct.SolverOptions(steps=20))):
             t, first, w = timed(robot, ins, dt, rows, solver, 2 if key == "40" else args.repeats)
             other[key] = t, row(name, dt, solver, t, first, w, distance(t, dt, ref, ref_dt))
             rows_out.append(other[key][1])
@@ -321,6 +334,9 @@ def main() -> None:
             rk4_20_vs_40_at_working_dt_um=1e6 * distance(traj, dt, other["40"][0], dt),
             rk4_10_meets_tolerance=other["10"][1]["converged"] and other["10"][1]["max_tip_error_um"] <= 1e6 * TOLERANCE_M,
             loose_tol_vs_default_at_working_dt_um=1e6 * distance(other["tol"][0], dt, traj, dt),
+            intervals=fine.intervals,
+            single_shooting_ms_per_time_step=other["single"][1]["ms_per_time_step"],
+            single_shooting_converged=other["single"][1]["converged"],
         )
         if name.startswith("Robot.paper()") and not args.quick:
             sizes = [int(b) for b in args.batch.split(",") if b]

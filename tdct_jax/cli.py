@@ -23,7 +23,7 @@ from . import fields, rod, status
 from .checks import UnitWarning, check_output, interval, target_note
 from .data import _error, _number
 from .description import CalibrationWarning, Robot
-from .dynamics import ALPHA, simulate
+from .dynamics import ALPHA, INTERVALS, default_solver, simulate
 from .dynamics import check as check_dynamics
 from .ik import MAX_STEPS as IK_MAX_STEPS
 from .ik.starts import STARTS as IK_STARTS
@@ -445,6 +445,12 @@ def _parser() -> argparse.ArgumentParser:
         default=ALPHA,
         help=f"BDF-alpha parameter in [-0.5, 0] (default {ALPHA:g}): 0 damps the fastest modes most, -0.5 not at all "
         "(and lets the base force grow: use -0.3 or more)",
+    )
+    m.add_argument(
+        "--intervals",
+        type=int,
+        help=f"shooting intervals of each time step (default: the most up to {INTERVALS} that divide the robot's RK4 "
+        "steps); more where small steps or sudden inputs make a step fail",
     )
     _depth_flags(m, ", held in time")
     m.add_argument(
@@ -1102,6 +1108,11 @@ def _simulate_command(args) -> int:
         check_output("--out", args.out, folder=True)
     robot = _robot(args)
     solver = _solver(args)
+    if args.intervals is None:
+        solver = default_solver(robot, Loads(), steps=solver.steps, max_iter=solver.max_iter)
+    else:
+        check_flag("--intervals", args.intervals, 1)
+        solver = SolverOptions(steps=solver.steps, max_iter=solver.max_iter, intervals=args.intervals)
     depths = _depths_typed(args, robot)
     try:
         check_dynamics(robot, Loads(), solver)
@@ -1199,9 +1210,9 @@ def _step_failure(traj, i: int, solver: SolverOptions, args) -> str:
             f"or start from the straight robot (--start straight){kept}"
         )
     return (
-        f"time step {i} (t = {t:g} s) did not converge: {why}. Raise --max-iter, or change --dt-ms: smaller "
-        "where the inputs jump, larger where hundreds of steps per period of the robot's slowest mode stretch the "
-        f"single shooting beyond float64 (docs/dynamics.md, Limits){kept}"
+        f"time step {i} (t = {t:g} s) did not converge: {why}. Raise --intervals (now {solver.intervals}; "
+        "it must divide the robot's RK4 steps) or --max-iter, or ramp the inputs where they jump (docs/dynamics.md, "
+        f"Limits){kept}"
     )
 
 

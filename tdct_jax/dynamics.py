@@ -61,6 +61,19 @@ ALPHA = -0.2
 """Default BDF-alpha parameter (Till et al.'s choice): second order, a little high-frequency
 dissipation."""
 
+INTERVALS = 4
+"""``simulate``'s shooting intervals by default (the largest count up to it that divides the
+robot's P x ``steps`` RK4 steps). On the paper robot at 4 ms steps: 2 Newton steps a time step
+against 3.2 with one interval, and faster per step; single shooting fails outright on it under a
+sudden 2 N pull at 5 ms (docs/dynamics.md)."""
+
+
+def default_solver(robot: Robot, load: Loads, steps: int = DEFAULT_SOLVER.steps, **options) -> SolverOptions:
+    """``simulate``'s solver by default: statics' options (``options`` override them) with the
+    largest shooting-interval count up to ``INTERVALS`` that divides the robot's RK4 steps."""
+    n = rod.n_intervals(robot, load) * steps
+    return SolverOptions(steps=steps, intervals=max(k for k in range(1, INTERVALS + 1) if n % k == 0), **options)
+
 
 class Scheme(NamedTuple):
     """BDF-alpha coefficients (module docstring) of one step length."""
@@ -412,19 +425,27 @@ class Trajectory:
         return self.position[..., -1, :]
 
 
-def _inputs(robot: Robot, tensions, tip_force, tip_moment, n: int | None):
-    """The per-time inputs as arrays (n, n_t), (n, 3), (n, 3) (constants broadcast along time) and n."""
+def _inputs(robot: Robot, load: Loads, given: dict, n: int | None):
+    """The per-time inputs (tensions, tip force and moment, the point loads' forces and moments)
+    as arrays with a leading time axis of n rows (constants broadcast along time), and n; a
+    point load's None is ``load``'s own."""
+    k = np.size(load.point_s)
+    shapes = {
+        "tensions": ((robot.n_tendons,), " N", None),
+        "tip_force": ((3,), " N", None),
+        "tip_moment": ((3,), " N m", None),
+        "point_force": ((k, 3), " N", load.point_force),
+        "point_moment": ((k, 3), " N m", load.point_moment),
+    }
     rows = {}
-    for name, x, width, unit in (
-        ("tensions", tensions, robot.n_tendons, " N"),
-        ("tip_force", tip_force, 3, " N"),
-        ("tip_moment", tip_moment, 3, " N m"),
-    ):
-        x = jnp.zeros(width) if x is None else as_array(name, x, unit=unit)
-        if np.ndim(x) not in (1, 2) or np.shape(x)[-1] != width:
-            raise ValueError(f"{name} has shape {np.shape(x)}: ({width},) or (times, {width}) expected")
+    for name, (shape, unit, own) in shapes.items():
+        x = given[name]
+        x = (jnp.zeros(shape) if own is None else own) if x is None else as_array(name, x, unit=unit)
+        if np.ndim(x) not in (len(shape), len(shape) + 1) or np.shape(x)[np.ndim(x) - len(shape) :] != shape:
+            where = f" ({k} point loads at load.point_s)" if name.startswith("point") else ""
+            raise ValueError(f"{name} has shape {np.shape(x)}: {shape} or (times, {', '.join(map(str, shape))}) expected{where}")
         rows[name] = x
-    lengths = {name: np.shape(x)[0] for name, x in rows.items() if np.ndim(x) == 2}
+    lengths = {name: np.shape(x)[0] for name, x in rows.items() if np.ndim(x) > len(shapes[name][0])}
     if n is None:
         if not lengths:
             raise ValueError("steps: give the number of time steps, or inputs with a time axis")
@@ -433,7 +454,7 @@ def _inputs(robot: Robot, tensions, tip_force, tip_moment, n: int | None):
         if m != n:
             raise ValueError(f"{name} has {m} rows: one per time, {n} (steps + 1: row 0 is the start)")
     check_range("tensions", rows["tensions"], 0.0, unit=" N")
-    return [jnp.broadcast_to(x, (n, np.shape(x)[-1])) for x in rows.values()], n
+    return [jnp.broadcast_to(x, (n, *shapes[name][0])) for name, x in rows.items()], n
 
 
 def check(robot: Robot, load: Loads, solver: SolverOptions) -> None:
@@ -455,12 +476,14 @@ def simulate(
     tensions=None,
     tip_force=None,
     tip_moment=None,
+    point_force=None,
+    point_moment=None,
     insertions=None,
     load: Loads | None = None,
     start: str = "static",
     alpha: float = ALPHA,
     gravity=STANDARD_GRAVITY,
-    solver: SolverOptions = DEFAULT_SOLVER,
+    solver: SolverOptions | None = None,
     throw: bool = True,
 ) -> Trajectory:
     """The robot's motion under time-varying tendon tensions and tip loads (module docstring).
@@ -472,23 +495,30 @@ def simulate(
             the start).
         tensions: tendon tensions [N], (n_t,) for all times or (steps + 1, n_t), row i at t = i dt.
         tip_force, tip_moment: world-frame tip load [N], [N m], (3,) or (steps + 1, 3).
+        point_force, point_moment: world-frame forces [N] and moments [N m] of ``load``'s k point
+            loads (at ``load.point_s``, fixed), (k, 3) or (steps + 1, k, 3): e.g. held at the start
+            and then removed; None: ``load``'s own, constant.
         insertions: tube depths [m], constant in time.
-        load: distributed force and point loads, constant in time (``Loads``; its tip load is
-            replaced by ``tip_force`` and ``tip_moment``).
+        load: distributed force and point loads (``Loads``; its tip load is replaced by
+            ``tip_force`` and ``tip_moment``, its point loads' values by ``point_force`` and
+            ``point_moment`` where given).
         start: "static": at rest in the static equilibrium of the inputs' first row; "straight":
             the straight, unstrained robot at rest.
         alpha: BDF-alpha parameter in [-0.5, 0] (module docstring).
         gravity: world gravity [m/s^2].
-        solver: RK4 steps per breakpoint interval, Newton tolerance and limit per time step.
+        solver: RK4 steps per breakpoint interval, shooting intervals, Newton tolerance and
+            limit per time step; None: ``default_solver`` (four intervals where they divide).
         throw: raise ``ConvergenceError`` when a time step does not converge (naming it); else
             check ``Trajectory.result``.
 
     Returns:
         Trajectory at the times 0, dt, ..., steps dt.
     """
-    for name, obj, cls in (("robot", robot, Robot), ("solver", solver, SolverOptions)):
-        if not isinstance(obj, cls):
+    load = Loads() if load is None else load
+    for name, obj, cls in (("robot", robot, Robot), ("load", load, Loads), ("solver", solver, SolverOptions)):
+        if not isinstance(obj, cls) and not (name == "solver" and obj is None):
             raise TypeError(f"{name} must be a tdct.{cls.__name__}, got {type(obj).__name__}")
+    solver = default_solver(robot, load) if solver is None else solver
     if start not in ("static", "straight"):
         raise ValueError(f"start = {start!r}: 'static' or 'straight'")
     dt = as_array("dt", dt, (), unit=" s")
@@ -497,15 +527,18 @@ def simulate(
     if steps is not None:
         steps = int(steps)
         check_range("steps", steps, 1)
-    (T, F, C), n = _inputs(robot, tensions, tip_force, tip_moment, None if steps is None else steps + 1)
-    load = Loads() if load is None else load
+    given = {"tensions": tensions, "tip_force": tip_force, "tip_moment": tip_moment}
+    given |= {"point_force": point_force, "point_moment": point_moment}
+    rows, n = _inputs(robot, load, given, None if steps is None else steps + 1)
+    T, F, C, PF, PM = rows
     act = Actuation(T[0], jnp.zeros(robot.n_tubes) if insertions is None else insertions)
     check(robot, load, solver)
     g = gravity_vector(gravity)
     base = jnp.concatenate([F[0], C[0] + jnp.cross(robot.length * E3, F[0])])  # the tip load carried to the base
     if start == "static":  # the static solver's load continuation finds the start
-        base = solve(robot, act, load.with_tip(F[0], C[0]), gravity=g, solver=solver, throw=throw).base_wrench
-    out = _simulate(robot, act.insertions, load, T, F, C, dt, alpha, g, base, solver, start == "static")
+        held = load._with(point_force=PF[0], point_moment=PM[0]).with_tip(F[0], C[0])
+        base = solve(robot, act, held, gravity=g, solver=solver, throw=throw).base_wrench
+    out = _simulate(robot, act.insertions, load, (T, F, C, PF, PM), dt, alpha, g, base, solver, start == "static")
     if throw and is_concrete(out.result):
         failed = np.flatnonzero(np.asarray(out.result) != status.SUCCESS)
         if failed.size:
@@ -513,14 +546,14 @@ def simulate(
             raise status.ConvergenceError(
                 f"simulate: time step {i} (t = {float(out.t[i]):g} s) did not converge: "
                 f"{status.message(int(out.result[i]), what='its Newton iteration', max_steps=solver.max_iter)}; "
-                "try a smaller dt or more solver.max_iter",
+                "try more solver.intervals (multiple shooting), a ramped input or more solver.max_iter",
                 int(out.result[i]),
             )
     return out
 
 
 @jax.jit(static_argnames=("solver", "static_start"))
-def _simulate(robot, insertions, load, T, F, C, dt, alpha, gravity, base, solver, static_start):
+def _simulate(robot, insertions, load, rows, dt, alpha, gravity, base, solver, static_start):
     """``simulate``'s compiled part: one scan over the time rows, each an implicit step (the first,
     with ``static_start``, the static root: every coefficient zero), so that the root and the
     sweep are compiled once; ``base``: the base wrench (N(0), M(0)) the first Newton starts from,
@@ -530,11 +563,14 @@ def _simulate(robot, insertions, load, T, F, C, dt, alpha, gravity, base, solver
     c = scheme(dt, alpha)
     L = robot.length
 
+    T = rows[0]
+
     def inputs(i, lam=1.0):
         """Row i's inputs, or with lam < 1 those of row i - 1 moved lam of the way to row i."""
         j = jnp.maximum(i - 1, 0)
-        T_i, F_i, C_i = (a[j] + lam * (a[i] - a[j]) for a in (T, F, C))
-        return Actuation._rebuild(T_i, insertions, jnp.zeros(0), ()), load.with_tip(F_i, C_i)
+        T_i, F_i, C_i, PF_i, PM_i = (a[j] + lam * (a[i] - a[j]) for a in rows)
+        ld = load._with(point_force=PF_i, point_moment=PM_i).with_tip(F_i, C_i)
+        return Actuation._rebuild(T_i, insertions, jnp.zeros(0), ()), ld
 
     def problem(i, c_i, history, lam=1.0, frozen=False):
         act, ld = inputs(i, lam)
@@ -643,7 +679,6 @@ def fit_motion(robot: Robot, motion: Motion, params=("sections[*].E", "sections[
         )
     measured = np.asarray(motion.tip, float)
     used = np.all(np.isfinite(measured), axis=1)
-    options = {"solver": DEFAULT_SOLVER} | options
 
     @jax.jit
     def residual_and_jacobian(x):

@@ -14,6 +14,7 @@ from PIL import Image
 import tdct_jax as tdct
 from tdct_jax import cli, status
 from tdct_jax.cli import main
+from tdct_jax.dynamics import default_solver
 
 ROD = """length = 0.2
 
@@ -54,7 +55,8 @@ def api(files):
     force = np.zeros((STEPS + 1, 3))
     force[:, 0] = np.interp(t, [0, 0.005, 0.02], [0, 0, 0.01])
     robot = tdct.Robot.from_toml(files / "rod.toml")
-    return tdct.simulate(robot, DT_MS * 1e-3, tensions=tension, tip_force=force, solver=tdct.SolverOptions(steps=RK4))
+    solver = default_solver(robot, tdct.Loads(), steps=RK4)
+    return tdct.simulate(robot, DT_MS * 1e-3, tensions=tension, tip_force=force, solver=solver)
 
 
 def _argv(files, *extra):
@@ -180,7 +182,7 @@ def test_a_step_that_does_not_converge_exits_1_with_its_time(files, api, tmp_pat
     assert main([*_argv(files, "--steps", str(RK4), "--out", str(out), "--gif", str(gif), "--quiet")]) == 1
     stdout, err = capsys.readouterr()
     assert err.startswith(f"tdct: time step {failed} (t = 0.007 s) did not converge: Newton used its --max-iter 50 steps")
-    assert "(0.001) below 1e-10" in err and "Raise --max-iter, or change --dt-ms" in err and "error" not in err
+    assert "(0.001) below 1e-10" in err and "Raise --intervals (now " in err and "error" not in err
     assert f"{STEPS + 1 - failed} of {STEPS + 1} steps did NOT converge" in stdout
     result = [int(row.rsplit(",", 1)[1]) for row in (out / "trajectory.csv").read_text().splitlines()[1:]]
     assert result == [0] * failed + [status.NEWTON_LIMIT] * (STEPS + 1 - failed)
