@@ -327,10 +327,10 @@ class StepInfo(NamedTuple):
 
 def _newton(problem: Problem, u0: Unknowns, solver: SolverOptions):
     """``newton.damped`` (Levenberg-Marquardt, so that a sudden input does not throw the first
-    iterate far off) on the problem: the point, Newton steps and the status code."""
-    u, r, _, steps, code = newton.damped(problem.linearize, _update, u0, solver.tol, solver.max_iter)
+    iterate far off) on the problem: the point, its Jacobian, Newton steps and the status code."""
+    u, r, J, steps, code = newton.damped(problem.linearize, _update, u0, solver.tol, solver.max_iter)
     code = jnp.where(code == status.SUCCESS, code, jnp.where(jnp.all(jnp.isfinite(r)), status.NEWTON_LIMIT, status.NONFINITE))
-    return u, jnp.asarray(steps, jnp.int32), code.astype(jnp.int32)
+    return u, J, jnp.asarray(steps, jnp.int32), code.astype(jnp.int32)
 
 
 def _step(problem_at, guess: Unknowns, previous: Unknowns, solver: SolverOptions):
@@ -339,33 +339,37 @@ def _step(problem_at, guess: Unknowns, previous: Unknowns, solver: SolverOptions
     as in statics from the last step's root ``previous``: ``solver.stages`` ramps of equal stages
     in turn, each stage from the last one's root. That search runs without derivatives; its root
     then passes ``lax.custom_root`` at the full inputs, so derivatives of anything downstream go
-    through each step's implicit solve (by the dense Jacobian in ``_at_rotations``' coordinates).
+    through each step's implicit solve, by Newton's last Jacobian (at the root, the residual's in
+    ``_at_rotations``' coordinates: a rotation's (I + w^) R there is cay(w) R to first order).
 
     Returns the root, the StepInfo (Newton steps and code of the search, the residual of the
     run at the root: the same to rounding) and that run (ends, nodes, stage values)."""
     frozen = lax.stop_gradient((guess, previous))
 
+    n = 6 + N_START * frozen[0].z.shape[0]
+
     def attempt(state):
-        a, _, iterations, _ = state
+        a, _, _, iterations, _ = state
         k = jnp.asarray(solver.stages)[a]
 
         def stage(j, carry):
-            u, its, code = carry
+            u, J, its, code = carry
             problem = problem_at((j + 1) / k, frozen=True)
-            u_new, steps, code_new = _newton(problem, u, solver)
+            u_new, J_new, steps, code_new = _newton(problem, u, solver)
             ok = code == status.SUCCESS
-            return jax.tree.map(lambda n, o: jnp.where(ok, n, o), u_new, u), its + steps, jnp.where(ok, code_new, code)
+            u, J = jax.tree.map(lambda n, o: jnp.where(ok, n, o), (u_new, J_new), (u, J))
+            return u, J, its + steps, jnp.where(ok, code_new, code)
 
         start = jax.tree.map(lambda g, p: jnp.where(a == 0, g, p), *frozen)
-        u, its, code = lax.fori_loop(0, k, stage, (start, jnp.int32(0), jnp.int32(status.SUCCESS)))
-        return a + 1, u, iterations + its, code
+        u, J, its, code = lax.fori_loop(0, k, stage, (start, jnp.eye(n), jnp.int32(0), jnp.int32(status.SUCCESS)))
+        return a + 1, u, J, iterations + its, code
 
     def more(state):
-        a, _, _, code = state
+        a, *_, code = state
         return (code != status.SUCCESS) & (a < len(solver.stages))
 
-    first = (jnp.int32(0), frozen[0], jnp.int32(0), jnp.int32(status.NEWTON_LIMIT))
-    _, found, iterations, code = lax.while_loop(more, attempt, first)
+    first = (jnp.int32(0), frozen[0], jnp.eye(n), jnp.int32(0), jnp.int32(status.NEWTON_LIMIT))
+    _, found, J, iterations, code = lax.while_loop(more, attempt, first)
 
     problem = problem_at(1.0)
     R_ref = found.R
@@ -373,8 +377,8 @@ def _step(problem_at, guess: Unknowns, previous: Unknowns, solver: SolverOptions
     def residual(v):
         return problem.residual(_at_rotations(v, R_ref))[0]
 
-    def tangent_solve(g, y):
-        return jnp.linalg.solve(jax.jacfwd(g)(y), y)
+    def tangent_solve(g, y):  # Newton's last Jacobian: at the root, the residual's in these coordinates
+        return jnp.linalg.solve(J, y)
 
     v = jnp.concatenate([found.x, jnp.concatenate([jnp.zeros((found.z.shape[0], 3)), found.z], -1).reshape(-1)])
     u = _at_rotations(lax.custom_root(residual, v, lambda f, v: v, tangent_solve), R_ref)
