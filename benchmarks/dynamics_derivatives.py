@@ -4,7 +4,9 @@ tension history), on a damped steel cantilever pulled by its tendon (issue 49).
 
 Forward mode carries one tangent per parameter through every time step's implicit solve;
 reverse mode runs the steps back once, whatever the number of parameters, storing each step's
-state. Compile time (first call less a warm one) and warm median over ``--repeats`` calls.
+state, or with ``simulate(checkpoint=True)`` only each step's carry, the step run again on the way
+back. Compile time (first call less a warm one), warm median over ``--repeats`` calls, and the
+compiled program's temporary memory (XLA's memory analysis).
 
 Run: python benchmarks/dynamics_derivatives.py [--steps 100] [--repeats 5]
 Writes benchmarks/results/dynamics_derivatives.json.
@@ -55,9 +57,14 @@ def main() -> None:
     t = np.arange(n + 1) * dt
     pull = jnp.asarray((np.sin(np.pi * np.minimum(t / PERIOD, 0.5)) ** 2)[:, None])
 
-    def loss(E, damping, tensions):
-        traj = tdct.simulate(robot(E, damping), dt, tensions=tensions, gravity=None, solver=SOLVER, throw=False)
+    def loss(E, damping, tensions, checkpoint=False):
+        traj = tdct.simulate(
+            robot(E, damping), dt, tensions=tensions, gravity=None, solver=SOLVER, throw=False, checkpoint=checkpoint
+        )
         return jnp.sum(traj.tip_position[:, 1] ** 2)
+
+    def checkpointed(E, damping, tensions):
+        return loss(E, damping, tensions, checkpoint=True)
 
     load = os.getloadavg()
     rows = {}
@@ -67,11 +74,14 @@ def main() -> None:
         "2 parameters (E, damping), reverse": (jax.jit(jax.grad(loss, argnums=(0, 1))), (E, 2e-4, pull)),
         f"{n + 1} parameters (the tension history), forward": (jax.jit(jax.jacfwd(loss, argnums=2)), (E, 2e-4, pull)),
         f"{n + 1} parameters (the tension history), reverse": (jax.jit(jax.grad(loss, argnums=2)), (E, 2e-4, pull)),
+        f"{n + 1} parameters, reverse, checkpointed": (jax.jit(jax.grad(checkpointed, argnums=2)), (E, 2e-4, pull)),
     }
     for name, (f, a) in cases.items():
         compile_s, warm_s = timed(f, a, args.repeats)
-        rows[name] = {"compile_s": compile_s, "warm_s": warm_s}
-        print(f"{name:48s} compile {compile_s:6.1f} s, warm {1e3 * warm_s:8.1f} ms")
+        memory = f.lower(*a).compile().memory_analysis()
+        temp_mb = None if memory is None else memory.temp_size_in_bytes / 2**20
+        rows[name] = {"compile_s": compile_s, "warm_s": warm_s, "temp_mb": temp_mb}
+        print(f"{name:48s} compile {compile_s:6.1f} s, warm {1e3 * warm_s:8.1f} ms, XLA temporaries {temp_mb} MB")
     out = Path(__file__).parent / "results" / "dynamics_derivatives.json"
     write_result(out, steps=n, dt_s=dt, load_average_before=load, load_average_after=os.getloadavg(), rows=rows)
 

@@ -1161,7 +1161,7 @@ def _simulate_command(args) -> int:
     result = traj.result
     failed = np.flatnonzero(result != status.SUCCESS)
     good = int(failed[0]) if failed.size else len(result)  # the rows before the first failure
-    newton = f"{np.mean(traj.iterations[1:]):.1f} Newton steps a step"
+    newton = f"{np.mean(traj.iterations[1:]):.1f} chord and Newton steps a step"
     state = "every step converged" if not failed.size else f"{failed.size} of {len(result)} steps did NOT converge"
     print(f"simulated {steps} steps of {args.dt_ms:g} ms to t = {times[-1]:g} s in {seconds:.1f} s: {state} ({newton})")
     if good:

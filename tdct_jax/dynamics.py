@@ -31,11 +31,11 @@ static ones, the base's N(0), M(0) (q = w = 0 at the clamped base); with K shoot
 (``solver.intervals``, multiple shooting) also each interior interval's start (R, N, M, q, w),
 and its continuity is K - 1 more residuals. Single shooting's sensitivity grows as exp(k L),
 k L = 1.06 sqrt(steps per first period) for a cantilever: the time step's inertia acts as an
-elastic foundation whose stiffness grows as 1 / dt^2, and K intervals divide k L by K. Newton's
-method (a jacfwd Jacobian, one forward pass for all intervals at once; Levenberg-Marquardt where
-a step does not lower the residual) starts from the last two steps extrapolated, and its root
-passes ``lax.custom_root``: derivatives of any trajectory output with respect to every input go
-through each step's implicit solve.
+elastic foundation whose stiffness grows as 1 / dt^2, and K intervals divide k L by K. Chord
+steps, then Newton's method (a jacfwd Jacobian, one forward pass for all intervals at once;
+Levenberg-Marquardt where a step does not lower the residual) start from the last two steps
+extrapolated (``_step``), and the root passes ``lax.custom_root``: derivatives of any trajectory
+output with respect to every input go through each step's implicit solve.
 """
 
 from __future__ import annotations
@@ -63,9 +63,8 @@ dissipation."""
 
 INTERVALS = 4
 """``simulate``'s shooting intervals by default (the largest count up to it that divides the
-robot's P x ``steps`` RK4 steps). On the paper robot at 4 ms steps: 2 Newton steps a time step
-against 3.2 with one interval, and faster per step; single shooting fails outright on it under a
-sudden 2 N pull at 5 ms (docs/dynamics.md)."""
+robot's P x ``steps`` RK4 steps). Single shooting fails outright on the paper robot under a
+sudden 2 N pull at 5 ms steps; four intervals converge at every step (docs/dynamics.md)."""
 
 
 def default_solver(robot: Robot, load: Loads, steps: int = DEFAULT_SOLVER.steps, **options) -> SolverOptions:
@@ -186,6 +185,11 @@ def _acceleration(c: Scheme, d: Dyn, q_h):
     return d.y.R @ (c.c0 * d.q + q_h + jnp.cross(d.w, d.q))
 
 
+CHORD_STEPS = 4
+"""Most chord steps (the Jacobian of the extrapolated guess, a primal pass each) a time step tries
+before Newton's own: from a guess as close as the last steps' extrapolation, each squares the
+error's ratio to the guess's (e_k ~ e_0^(k+1))."""
+
 N_START = 15
 """An interior shooting interval's start unknowns: its rotation (3), then N, M, q and w (3 each)."""
 
@@ -300,7 +304,11 @@ def _update(u: Unknowns, r, J, mu):
     and the smallest singular values are far below MU_START); rotations move by the Cayley map."""
     JJ = J.T @ J
     damped = -jnp.linalg.solve(JJ + mu * jnp.diag(jnp.diag(JJ)), J.T @ r)
-    d = jnp.where(mu <= newton.MU_START, -jnp.linalg.solve(J, r), damped)
+    return _move(u, jnp.where(mu <= newton.MU_START, -jnp.linalg.solve(J, r), damped))
+
+
+def _move(u: Unknowns, d) -> Unknowns:
+    """u moved by d in ``Problem.linearize``'s coordinates; rotations by the Cayley map."""
     inner = d[6:].reshape(-1, N_START)
     return Unknowns(u.x + d[:6], cayley(inner[:, :3]) @ u.R, u.z + inner[:, 3:])
 
@@ -327,49 +335,68 @@ class StepInfo(NamedTuple):
 
 def _newton(problem: Problem, u0: Unknowns, solver: SolverOptions):
     """``newton.damped`` (Levenberg-Marquardt, so that a sudden input does not throw the first
-    iterate far off) on the problem: the point, its Jacobian, Newton steps and the status code."""
-    u, r, J, steps, code = newton.damped(problem.linearize, _update, u0, solver.tol, solver.max_iter)
+    iterate far off) on the problem: the point, Newton steps and the status code."""
+    u, r, _, steps, code = newton.damped(problem.linearize, _update, u0, solver.tol, solver.max_iter)
     code = jnp.where(code == status.SUCCESS, code, jnp.where(jnp.all(jnp.isfinite(r)), status.NEWTON_LIMIT, status.NONFINITE))
-    return u, J, jnp.asarray(steps, jnp.int32), code.astype(jnp.int32)
+    return u, jnp.asarray(steps, jnp.int32), code.astype(jnp.int32)
 
 
 def _step(problem_at, guess: Unknowns, previous: Unknowns, solver: SolverOptions):
     """One time step's root, ``problem_at(lam, frozen)`` its Problem with the step's change of
-    inputs scaled by lam (1: the step's own), its inputs without derivatives where ``frozen``. Newton from ``guess``; where it fails, load continuation
-    as in statics from the last step's root ``previous``: ``solver.stages`` ramps of equal stages
-    in turn, each stage from the last one's root. That search runs without derivatives; its root
-    then passes ``lax.custom_root`` at the full inputs, so derivatives of anything downstream go
-    through each step's implicit solve, by Newton's last Jacobian (at the root, the residual's in
-    ``_at_rotations``' coordinates: a rotation's (I + w^) R there is cay(w) R to first order).
+    inputs scaled by lam (1: the step's own), its inputs without derivatives where ``frozen``.
 
-    Returns the root, the StepInfo (Newton steps and code of the search, the residual of the
-    run at the root: the same to rounding) and that run (ends, nodes, stage values)."""
-    frozen = lax.stop_gradient((guess, previous))
+    First up to CHORD_STEPS chord steps from ``guess`` with the Jacobian there, each checked by a
+    primal pass (a Jacobian pass costs about four), while each lowers the residual: where they
+    reach the tolerance, the step is done. Else Newton (``_newton``) from the best point; where it
+    fails, load continuation as in statics from
+    the last step's root ``previous``: ``solver.stages`` ramps of equal stages in turn, each stage
+    from the last one's root. That search runs without derivatives; its root then passes
+    ``lax.custom_root`` at the full inputs, so derivatives of anything downstream go through each
+    step's implicit solve, by the Jacobian at the root (``Problem.linearize``: in
+    ``_at_rotations``' coordinates there, a rotation's (I + w^) R is cay(w) R to first order).
 
-    n = 6 + N_START * frozen[0].z.shape[0]
+    Returns the root, the StepInfo (chord and Newton steps and the code of the search, the
+    residual of the run at the root: the same to rounding) and that run (ends, nodes, stage
+    values)."""
+    guess, previous = lax.stop_gradient((guess, previous))
+    full = problem_at(1.0, frozen=True)
+    r, J = full.linearize(guess)
+    factors = jax.scipy.linalg.lu_factor(J)
+
+    def chord(state):
+        u, r, k, _ = state
+        u_new = _move(u, -jax.scipy.linalg.lu_solve(factors, r))
+        r_new = full.residual(u_new)[0]
+        lower = jnp.all(jnp.isfinite(r_new)) & (jnp.sum(r_new**2) < jnp.sum(r**2))
+        return (*jax.tree.map(lambda a, b: jnp.where(lower, a, b), (u_new, r_new), (u, r)), k + 1, lower)
+
+    def chording(state):
+        _, r, k, lower = state
+        return lower & (k < CHORD_STEPS) & (jnp.max(jnp.abs(r)) > solver.tol)
+
+    guess, r, chords, _ = lax.while_loop(chording, chord, (guess, r, jnp.int32(0), jnp.bool_(True)))
 
     def attempt(state):
-        a, _, _, iterations, _ = state
+        a, _, iterations, _ = state
         k = jnp.asarray(solver.stages)[a]
 
         def stage(j, carry):
-            u, J, its, code = carry
-            problem = problem_at((j + 1) / k, frozen=True)
-            u_new, J_new, steps, code_new = _newton(problem, u, solver)
+            u, its, code = carry
+            u_new, steps, code_new = _newton(problem_at((j + 1) / k, frozen=True), u, solver)
             ok = code == status.SUCCESS
-            u, J = jax.tree.map(lambda n, o: jnp.where(ok, n, o), (u_new, J_new), (u, J))
-            return u, J, its + steps, jnp.where(ok, code_new, code)
+            return jax.tree.map(lambda n, o: jnp.where(ok, n, o), u_new, u), its + steps, jnp.where(ok, code_new, code)
 
-        start = jax.tree.map(lambda g, p: jnp.where(a == 0, g, p), *frozen)
-        u, J, its, code = lax.fori_loop(0, k, stage, (start, jnp.eye(n), jnp.int32(0), jnp.int32(status.SUCCESS)))
-        return a + 1, u, J, iterations + its, code
+        start = jax.tree.map(lambda g, p: jnp.where(a == 0, g, p), guess, previous)
+        u, its, code = lax.fori_loop(0, k, stage, (start, jnp.int32(0), jnp.int32(status.SUCCESS)))
+        return a + 1, u, iterations + its, code
 
     def more(state):
         a, *_, code = state
         return (code != status.SUCCESS) & (a < len(solver.stages))
 
-    first = (jnp.int32(0), frozen[0], jnp.eye(n), jnp.int32(0), jnp.int32(status.NEWTON_LIMIT))
-    _, found, J, iterations, code = lax.while_loop(more, attempt, first)
+    done = jnp.max(jnp.abs(r)) <= solver.tol
+    first = (jnp.int32(0), guess, chords, jnp.where(done, status.SUCCESS, status.NEWTON_LIMIT).astype(jnp.int32))
+    _, found, iterations, code = lax.while_loop(more, attempt, first)
 
     problem = problem_at(1.0)
     R_ref = found.R
@@ -377,8 +404,8 @@ def _step(problem_at, guess: Unknowns, previous: Unknowns, solver: SolverOptions
     def residual(v):
         return problem.residual(_at_rotations(v, R_ref))[0]
 
-    def tangent_solve(g, y):  # Newton's last Jacobian: at the root, the residual's in these coordinates
-        return jnp.linalg.solve(J, y)
+    def tangent_solve(g, y):
+        return jnp.linalg.solve(full.linearize(found)[1], y)
 
     v = jnp.concatenate([found.x, jnp.concatenate([jnp.zeros((found.z.shape[0], 3)), found.z], -1).reshape(-1)])
     u = _at_rotations(lax.custom_root(residual, v, lambda f, v: v, tangent_solve), R_ref)
@@ -399,7 +426,7 @@ class Trajectory:
             (at s = 0 the load on the base), (n, m, 3).
         velocity: p_t [m/s] and angular_velocity: R w [rad/s], (n, m, 3).
         tensions: the tendon tensions [N], (n, n_t).
-        iterations: Newton steps of each time step (n,), 0 at the start.
+        iterations: chord and Newton steps of each time step (n,) (``_step``), 0 at the start.
         result: each time step's status code (n,) (``tdct_jax.status``), SUCCESS (0) when its
             scaled residual reached ``solver.tol``.
         residual_norm: each time step's scaled residual, max norm (n,).
@@ -489,6 +516,7 @@ def simulate(
     gravity=STANDARD_GRAVITY,
     solver: SolverOptions | None = None,
     throw: bool = True,
+    checkpoint: bool = False,
 ) -> Trajectory:
     """The robot's motion under time-varying tendon tensions and tip loads (module docstring).
 
@@ -510,10 +538,13 @@ def simulate(
             the straight, unstrained robot at rest.
         alpha: BDF-alpha parameter in [-0.5, 0] (module docstring).
         gravity: world gravity [m/s^2].
-        solver: RK4 steps per breakpoint interval, shooting intervals, Newton tolerance and
+        solver: RK4 steps per breakpoint interval, shooting intervals, Newton's tolerance and
             limit per time step; None: ``default_solver`` (four intervals where they divide).
         throw: raise ``ConvergenceError`` when a time step does not converge (naming it); else
             check ``Trajectory.result``.
+        checkpoint: under reverse mode (``jax.grad``), keep only each step's carry and run the
+            step again on the way back (``jax.checkpoint``): memory of a long trajectory's
+            gradient for about one more forward pass (benchmarks/dynamics_derivatives.py).
 
     Returns:
         Trajectory at the times 0, dt, ..., steps dt.
@@ -542,7 +573,7 @@ def simulate(
     if start == "static":  # the static solver's load continuation finds the start
         held = load._with(point_force=PF[0], point_moment=PM[0]).with_tip(F[0], C[0])
         base = solve(robot, act, held, gravity=g, solver=solver, throw=throw).base_wrench
-    out = _simulate(robot, act.insertions, load, (T, F, C, PF, PM), dt, alpha, g, base, solver, start == "static")
+    out = _simulate(robot, act.insertions, load, (T, F, C, PF, PM), dt, alpha, g, base, solver, start == "static", checkpoint)
     if throw and is_concrete(out.result):
         failed = np.flatnonzero(np.asarray(out.result) != status.SUCCESS)
         if failed.size:
@@ -556,8 +587,8 @@ def simulate(
     return out
 
 
-@jax.jit(static_argnames=("solver", "static_start"))
-def _simulate(robot, insertions, load, rows, dt, alpha, gravity, base, solver, static_start):
+@jax.jit(static_argnames=("solver", "static_start", "checkpoint"))
+def _simulate(robot, insertions, load, rows, dt, alpha, gravity, base, solver, static_start, checkpoint):
     """``simulate``'s compiled part: one scan over the time rows, each an implicit step (the first,
     with ``static_start``, the static root: every coefficient zero), so that the root and the
     sweep are compiled once; ``base``: the base wrench (N(0), M(0)) the first Newton starts from,
@@ -566,7 +597,6 @@ def _simulate(robot, insertions, load, rows, dt, alpha, gravity, base, solver, s
     n_nodes = rod.n_intervals(robot, load) * solver.steps
     c = scheme(dt, alpha)
     L = robot.length
-
     T = rows[0]
 
     def inputs(i, lam=1.0):
@@ -602,13 +632,14 @@ def _simulate(robot, insertions, load, rows, dt, alpha, gravity, base, solver, s
     x0 = jnp.concatenate([base[:3], base[3:] / L]) / F_c0
     rest = (jnp.zeros((n_nodes, 4, 12)), jnp.zeros(6))
     lay0 = layout(robot, act0, load0, gravity, solver.steps)
-    first = Dyn(State(jnp.zeros(3), jnp.eye(3), base[:3], base[3:]), jnp.zeros(3), jnp.zeros(3))
-    y = _integrate(robot, load0, gravity, lay0._replace(tip=()), STATIC, rest[0], first)[1]
+    at_base = Dyn(State(jnp.zeros(3), jnp.eye(3), base[:3], base[3:]), jnp.zeros(3), jnp.zeros(3))
+    y = _integrate(robot, load0, gravity, lay0._replace(tip=()), STATIC, rest[0], at_base)[1]
     inner = jax.tree.map(lambda a: a[n_nodes // K : n_nodes : n_nodes // K], y)
     z0 = jnp.concatenate([inner.y.N, inner.y.M, inner.q, inner.w], -1) / _scale(F_c0, L, dt)[None]
     u0 = Unknowns(x0, inner.y.R, z0)
     start = ((u0, u0), rest, rest, jax.tree.map(jnp.zeros_like, rest))
-    _, (nodes, info) = lax.scan(advance, start, jnp.arange(0 if static_start else 1, T.shape[0]))
+    step = jax.checkpoint(advance) if checkpoint else advance
+    _, (nodes, info) = lax.scan(step, start, jnp.arange(0 if static_start else 1, T.shape[0]))
     s = jnp.concatenate([lay0.s0, L[None]])
     if not static_start:  # the straight, unstrained robot at rest
         zeros = jnp.zeros((s.size, 3))
