@@ -8,13 +8,15 @@ the working step. Every run uses ``simulate``'s default solver (``dynamics.defau
 four shooting intervals where they divide the RK4 steps). There: compile time (first call less a
 warm one), the warm wall time per time step (median of warm calls of the whole ``simulate``, the
 start's static solve included), the real-time factor (simulated time over wall time) and the
-mean Newton steps per time step; the same with 10 RK4 steps per interval instead of 20, with its
-own distance to the reference, with Newton's tolerance loosened from 1e-10 to 1e-6, and with
-single shooting (one interval); 40 RK4 steps at the working step, for the spatial error of 20;
-and what bounds the speed: the cost of one time step's primal shooting pass and of its Jacobian
-pass (``Problem.linearize``), each timed alone, against the measured step (a step takes
-``iterations + 1`` Jacobian passes and one primal pass, for its nodes). Last, ``jax.vmap`` of ``simulate`` over tension amplitudes (batches of 8 and 64, the
-paper robot at its working step): the summed real-time factor of the batch.
+mean chord and Newton steps per time step (``Trajectory.iterations``); the same with 10 RK4 steps
+per interval instead of 20, with its own distance to the reference, with Newton's tolerance
+loosened from 1e-10 to 1e-6, and with single shooting (one interval); 40 RK4 steps at the working
+step, for the spatial error of 20; and what bounds the speed: the cost of one time step's primal
+shooting pass and of its Jacobian pass (``Problem.linearize``), each timed alone, against the
+measured step (where chord steps suffice a step takes one Jacobian pass and ``iterations + 1``
+primal passes: one a chord step, one for its nodes). Last, ``jax.vmap`` of ``simulate`` over
+tension amplitudes (batches of 8 and 64, the paper robot at its working step): the summed
+real-time factor of the batch.
 
 The robots (no point masses):
 - ``Robot.paper()``, the tube inserted 80 mm, its silicone given a Kelvin-Voigt retardation time
@@ -150,7 +152,7 @@ def row(name, dt, solver, traj, first, warm, error):
     err = "" if error is None else f", tip within {1e6 * error:8.1f} um"
     print(
         f"{name:32s} dt {1e3 * dt:5.2f} ms, {solver.steps} RK4, K {solver.intervals}, tol {float(solver.tol):.0e}: {out['ms_per_time_step']:6.2f} ms/step, "
-        f"{out['real_time_factor']:.3f}x real time, {out['mean_newton_steps']:.2f} Newton steps, "
+        f"{out['real_time_factor']:.3f}x real time, {out['mean_newton_steps']:.2f} chord/Newton steps, "
         f"compile {out['compile_s']:.1f} s{err}{'' if out['converged'] else ', NOT CONVERGED'}",
         flush=True,
     )
@@ -169,9 +171,9 @@ def anatomy(robot, insertions, dt, solver, newton_steps, ms_per_step, repeats=20
     run PASSES times in a compiled loop, each pass's unknowns
     depending on the last pass's output so that none is hoisted, with ``dynamics.Problem``'s
     arguments as the loop's arguments (as in ``simulate``'s scan); and a warm static
-    ``tdct.solve`` for scale. The time step they predict: ``newton_steps + 1`` Jacobian passes
-    and one primal pass (its nodes; the step may take more), against the measured
-    ``ms_per_step``."""
+    ``tdct.solve`` for scale. The time step they predict where chord steps suffice: one Jacobian
+    pass and ``newton_steps + 1`` primal passes (a step that needs Newton takes more), against the
+    measured ``ms_per_step``."""
     T = pull(robot.n_tendons, dt, 1, AMPLITUDE / 2)[0]
     act = tdct.Actuation(T, jnp.zeros(robot.n_tubes) if insertions is None else insertions)
     load = tdct.Loads()
@@ -214,7 +216,7 @@ def anatomy(robot, insertions, dt, solver, newton_steps, ms_per_step, repeats=20
         jax.block_until_ready(f())
         out[f"{name}_ms"] = 1e3 * float(np.median(timings(f, repeats))) / k
     out["jacobian_over_primal"] = out["jacobian_pass_ms"] / out["primal_pass_ms"]
-    out["predicted_ms_per_time_step"] = (newton_steps + 1) * out["jacobian_pass_ms"] + out["primal_pass_ms"]
+    out["predicted_ms_per_time_step"] = out["jacobian_pass_ms"] + (newton_steps + 1) * out["primal_pass_ms"]
     out["measured_ms_per_time_step"] = ms_per_step
     print(", ".join(f"{k} {v:.3g}" for k, v in out.items()), flush=True)
     return out

@@ -185,10 +185,11 @@ def summary(suffix: str, seconds: dict) -> str:
                 "robot",
                 "dt",
                 "RK4 steps",
+                "intervals",
                 "Newton tol",
                 "per time step",
                 "real-time factor",
-                "Newton steps",
+                "chord/Newton steps",
                 "tip vs reference",
                 "compile",
             ),
@@ -197,6 +198,7 @@ def summary(suffix: str, seconds: dict) -> str:
                     r["robot"],
                     f"{r['dt_ms']:g} ms",
                     r["rk4_steps"],
+                    r.get("intervals", 1),
                     f"{r['newton_tol']:.0e}",
                     f"{r['ms_per_time_step']:.2f} ms",
                     f"{r['real_time_factor']:.2f}x",
@@ -205,7 +207,11 @@ def summary(suffix: str, seconds: dict) -> str:
                     f"{r['compile_s']:.1f} s",
                 )
                 for r in dynamics["rows"]
-                if dynamics["quick"] or r.get("working") or r["rk4_steps"] != 20 or r["newton_tol"] != 1e-10
+                if dynamics["quick"]
+                or r.get("working")
+                or r["rk4_steps"] != 20
+                or r["newton_tol"] != 1e-10
+                or r.get("intervals") == 1
             ],
         )
     if gpu:
