@@ -257,9 +257,7 @@ class Problem(NamedTuple):
         """Continuity at every interior start ((K - 1) 15, flattened), then the tip's (6,); and
         the run (ends, nodes, stage values)."""
         out = self.run(*self.starts(u))
-        cont, tip = self.closing(out[0], jnp.concatenate([u.R, jnp.eye(3)[None]]))
-        gap = cont[:-1] - jnp.concatenate([jnp.zeros((self.K - 1, 3)), u.z], -1)
-        return jnp.concatenate([gap.reshape(-1), tip]), out
+        return _stacked(u, *self.closing(out[0], _next_rotations(u))), out
 
     def linearize(self, u: Unknowns):
         """The residual and its Jacobian in (x, each interior's rotation (I + w^) R, then z): one
@@ -267,7 +265,7 @@ class Problem(NamedTuple):
         only), its blocks set into the dense matrix."""
         K = self.K
         R, y = self.starts(u)
-        R_next = jnp.concatenate([u.R, jnp.eye(3)[None]])
+        R_next = _next_rotations(u)
         base = slice(3, 9)  # the base wrench among a start's perturbations
         E = jnp.eye(N_START)[:, base] if K == 1 else jnp.eye(N_START)
 
@@ -277,24 +275,32 @@ class Problem(NamedTuple):
             return out, out
 
         (G, T), (cont, tip) = jax.jacfwd(ends, has_aux=True)(jnp.zeros(E.shape[1]))
+
+        def columns(k):  # interval k's start unknowns: x for the first
+            return slice(0, 6) if k == 0 else slice(6 + N_START * (k - 1), 6 + N_START * k)
+
+        def own(k, block):  # d(interval k's end) / d(its start's unknowns)
+            return block[..., base] if k == 0 and K > 1 else block
+
         n = 6 + N_START * (K - 1)
-
-        def cols(k, block):
-            return (
-                (slice(0, 6), block[..., base] if K > 1 else block)
-                if k == 0
-                else (slice(6 + N_START * (k - 1), 6 + N_START * k), block)
-            )
-
         J = jnp.zeros((n, n))
         for k in range(K - 1):
             rows = slice(N_START * k, N_START * (k + 1))
-            c_k, b_k = cols(k, G[k])
-            J = J.at[rows, c_k].set(b_k).at[rows, cols(k + 1, None)[0]].set(-jnp.eye(N_START))
-        c_K, b_K = cols(K - 1, T)
-        J = J.at[n - 6 :, c_K].set(b_K)
-        gap = cont[:-1] - jnp.concatenate([jnp.zeros((K - 1, 3)), u.z], -1)
-        return jnp.concatenate([gap.reshape(-1), tip]), J
+            J = J.at[rows, columns(k)].set(own(k, G[k])).at[rows, columns(k + 1)].set(-jnp.eye(N_START))
+        J = J.at[n - 6 :, columns(K - 1)].set(own(K - 1, T))
+        return _stacked(u, cont, tip), J
+
+
+def _next_rotations(u: Unknowns):
+    """Each interval's next start rotation (K, 3, 3); the last interval's (unused) I."""
+    return jnp.concatenate([u.R, jnp.eye(3)[None]])
+
+
+def _stacked(u: Unknowns, cont, tip):
+    """The residual vector from ``Problem.closing``'s: each interior start's gap ((K - 1) 15),
+    then the tip's (6,)."""
+    gap = cont[:-1] - jnp.concatenate([jnp.zeros((u.z.shape[0], 3)), u.z], -1)
+    return jnp.concatenate([gap.reshape(-1), tip])
 
 
 def _update(u: Unknowns, r, J, mu):
@@ -322,9 +328,14 @@ def _extrapolate(u: Unknowns, before: Unknowns) -> Unknowns:
 
 def _at_rotations(v, R_ref) -> Unknowns:
     """The Unknowns of a vector (x, then each interior's Cayley vector of R R_ref^T and z): the
-    coordinates in which ``lax.custom_root`` differentiates the root."""
-    inner = v[6:].reshape(-1, N_START)
-    return Unknowns(v[:6], cayley(inner[:, :3]) @ R_ref, inner[:, 3:])
+    coordinates in which ``lax.custom_root`` differentiates the root (``_vector`` the inverse at
+    R = R_ref)."""
+    return _move(Unknowns(jnp.zeros(6), R_ref, jnp.zeros((R_ref.shape[0], 12))), v)
+
+
+def _vector(u: Unknowns):
+    """u as ``_at_rotations``' vector with R_ref = u.R (every Cayley vector zero)."""
+    return jnp.concatenate([u.x, jnp.concatenate([jnp.zeros((u.z.shape[0], 3)), u.z], -1).reshape(-1)])
 
 
 class StepInfo(NamedTuple):
@@ -407,8 +418,7 @@ def _step(problem_at, guess: Unknowns, previous: Unknowns, solver: SolverOptions
     def tangent_solve(g, y):
         return jnp.linalg.solve(full.linearize(found)[1], y)
 
-    v = jnp.concatenate([found.x, jnp.concatenate([jnp.zeros((found.z.shape[0], 3)), found.z], -1).reshape(-1)])
-    u = _at_rotations(lax.custom_root(residual, v, lambda f, v: v, tangent_solve), R_ref)
+    u = _at_rotations(lax.custom_root(residual, _vector(found), lambda f, v: v, tangent_solve), R_ref)
     r, out = problem.residual(u)
     norm = lax.stop_gradient(jnp.max(jnp.abs(r)))
     return u, StepInfo(iterations, code, norm), out
