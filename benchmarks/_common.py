@@ -1,5 +1,5 @@
-"""Shared by the benchmark scripts: timing with block_until_ready, and results files that say
-when, where and with which JAX they were measured."""
+"""Shared by the benchmark scripts: timing with block_until_ready, results files that say when,
+where and with which JAX they were measured, and the dynamics benchmarks' steel cantilever."""
 
 from __future__ import annotations
 
@@ -11,6 +11,8 @@ from pathlib import Path
 
 import jax
 import numpy as np
+
+import tdct_jax as tdct
 
 
 def timings(f, repeats: int) -> np.ndarray:
@@ -66,3 +68,20 @@ def paper_section(robot) -> dict:
         EI_tube=0.0 if tube is None else float(tube.E * tube.second_moment),
         rho_tube=0.0 if tube is None else float(tube.density * tube.area),
     )
+
+
+STEEL = dict(length=0.3, diameter=2e-3, E=200e9, density=7800.0)
+"""The slender steel cantilever of tests/test_dynamics.py [m, m, Pa, kg/m^3], for the dynamics
+benchmarks."""
+STEEL_PERIOD = (
+    2 * np.pi * STEEL["length"] ** 2 / (1.8751**2 * np.sqrt(STEEL["E"] * STEEL["diameter"] ** 2 / 16 / STEEL["density"]))
+)
+"""Its Euler-Bernoulli first period [s] (EI / (rho A) = E D^2 / 16)."""
+
+
+def steel_cantilever(E: float = STEEL["E"], damping: float = 0.0):
+    """``STEEL`` as a tdct.Robot with one tendon 5 mm from the axis at body +y, and its modulus
+    and Kelvin-Voigt retardation time [s] given."""
+    L = STEEL["length"]
+    section = tdct.Section(end=L, outer_diameter=STEEL["diameter"], E=E, nu=0.3, density=STEEL["density"], damping=damping)
+    return tdct.Robot(L, (section,), (tdct.Tendon(offset=5e-3, angle=np.pi / 2),))

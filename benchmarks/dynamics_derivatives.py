@@ -22,18 +22,13 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import write_result
+from _common import STEEL, STEEL_PERIOD, steel_cantilever, write_result
 
 import tdct_jax as tdct
 
-L, D, E, RHO = 0.3, 2e-3, 200e9, 7800.0
-PERIOD = 2 * np.pi * L**2 / (1.8751**2 * np.sqrt(E * D**2 / 16 / RHO))
+E = STEEL["E"]
+PERIOD = STEEL_PERIOD
 SOLVER = tdct.SolverOptions(steps=20)
-
-
-def robot(E=E, damping=2e-4):
-    section = tdct.Section(end=L, outer_diameter=D, E=E, nu=0.3, density=RHO, damping=damping)
-    return tdct.Robot(L, (section,), (tdct.Tendon(offset=5e-3, angle=np.pi / 2),))
 
 
 def timed(f, args, repeats):
@@ -59,7 +54,7 @@ def main() -> None:
 
     def loss(E, damping, tensions, checkpoint=False):
         traj = tdct.simulate(
-            robot(E, damping), dt, tensions=tensions, gravity=None, solver=SOLVER, throw=False, checkpoint=checkpoint
+            steel_cantilever(E, damping), dt, tensions=tensions, gravity=None, solver=SOLVER, throw=False, checkpoint=checkpoint
         )
         return jnp.sum(traj.tip_position[:, 1] ** 2)
 

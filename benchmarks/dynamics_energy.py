@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 import matplotlib
 import numpy as np
-from _common import write_result
+from _common import STEEL_PERIOD, steel_cantilever, write_result
 from tqdm import tqdm
 
 import tdct_jax as tdct
@@ -40,21 +40,13 @@ from tdct_jax import rod
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-L, D, E, RHO = 0.3, 2e-3, 200e9, 7800.0
-A, I = np.pi / 4 * D**2, np.pi / 64 * D**4
-T1 = 2 * np.pi / (1.8751**2 * np.sqrt(E * I / (RHO * A)) / L**2)
-"""Euler-Bernoulli's first period [s]."""
+T1 = STEEL_PERIOD
 SOLVER = tdct.SolverOptions(steps=20, intervals=4)
 ALPHAS = (-0.2, -0.4, 0.0)
 STEPS_PER_PERIOD = (50, 100)
 FROM_PERIOD = 10
 TRAPEZOID_PERIODS = 16
 """alpha = -0.5 is run at 50 steps a period for this many periods only: it fails by about 18."""
-
-
-def cantilever() -> tdct.Robot:
-    section = tdct.Section(end=L, outer_diameter=D, E=E, nu=0.3, density=RHO)
-    return tdct.Robot(L, (section,), (tdct.Tendon(offset=5e-3, angle=np.pi / 2),))
 
 
 def energy(robot: tdct.Robot, traj) -> np.ndarray:
@@ -75,7 +67,7 @@ def main() -> None:
     parser.add_argument("--periods", type=int, default=100, help="periods of the first mode simulated (default 100)")
     args = parser.parse_args()
     load_start = os.getloadavg()
-    robot = cantilever()
+    robot = steel_cantilever()
     rows, curves = [], {}
     runs = [(a, n, args.periods) for a in ALPHAS for n in STEPS_PER_PERIOD] + [(-0.5, 50, TRAPEZOID_PERIODS)]
     for alpha, n, periods in tqdm(runs, desc="simulating", unit="run"):
