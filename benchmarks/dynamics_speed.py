@@ -179,15 +179,15 @@ def anatomy(robot, insertions, dt, solver, newton_steps, ms_per_step, repeats=20
     load = tdct.Loads()
     g = jnp.asarray(gravity_vector(STANDARD_GRAVITY))
     c = dynamics.scheme(dt)
-    lay = dynamics.layout(robot, act, load, g, solver.steps)
-    history = (jnp.zeros((lay.s0.size, 4, 12)), jnp.zeros(6))  # a robot at rest: no strain rate, no velocity
+    n = rod.n_intervals(robot, load) * solver.steps
+    history = (jnp.zeros((n, 4, 12)), jnp.zeros(6))  # a robot at rest: no strain rate, no velocity
     F_c = rod.force_scale(robot, act, load, g)
     base = tdct.solve(robot, act, solver=solver).base_wrench
     x = jnp.concatenate([base[:3], base[3:] / robot.length]) / F_c
     K = solver.intervals
 
-    def problem(robot, load, lay, c, history, F_c):
-        return dynamics.Problem(robot, load, g, lay, c, history, F_c, dynamics._scale(F_c, robot.length, dt), K)
+    def problem(robot, act, load, c, history, F_c):
+        return dynamics.Problem(robot, act, load, g, c, history, F_c, dynamics._scale(F_c, robot.length, dt), K, solver.steps)
 
     def unknowns(x):  # the interior starts' values do not change a pass's cost
         return dynamics.Unknowns(x, jnp.broadcast_to(jnp.eye(3), (K - 1, 3, 3)), jnp.zeros((K - 1, 12)))
@@ -205,7 +205,7 @@ def anatomy(robot, insertions, dt, solver, newton_steps, ms_per_step, repeats=20
 
         return passes
 
-    args = (x, robot, load, lay, c, history, F_c)
+    args = (x, robot, act, load, c, history, F_c)
     primal, jacobian = looped(residual), looped(linearized)
     out = {}
     for name, f, k in (

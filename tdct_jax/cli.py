@@ -414,9 +414,10 @@ def _parser() -> argparse.ArgumentParser:
     m = verbs.add_parser(
         "simulate",
         parents=[described],
-        help="the robot in motion under tendon tensions and tip forces given along time (docs/dynamics.md)",
-        epilog="The input table: a CSV with the time column t_s (seconds, from 0, increasing), one column per tendon "
-        "tension_1_N, tension_2_N, ... (newtons, tendons numbered from 1) and optionally tip_force_x_N, tip_force_y_N, "
+        help="the robot in motion under tendon tensions or displacements and tip forces given along time (docs/dynamics.md)",
+        epilog="The input table: a CSV with the time column t_s (seconds, from 0, increasing), one column per tendon, "
+        "tension_1_N, tension_2_N, ... (newtons, tendons numbered from 1) or for a displacement-driven tendon "
+        "displacement_1_mm, ... (the length pulled at the base), and optionally tip_force_x_N, tip_force_y_N, "
         "tip_force_z_N (world frame, a missing one 0); linear between its rows, the last row held after its time "
         "(docs/cli.md). --max-iter limits the Newton steps of each time step.",
     )
@@ -1016,60 +1017,77 @@ def _sweep_command(args) -> int:
 
 class InputTable(NamedTuple):
     """``tdct simulate``'s input table in SI units: its times [s] (k,), from 0 and increasing, the
-    tendon tensions [N] (k, n_t) and the world-frame tip force [N] (k, 3) of each row."""
+    tendon tensions [N] (k, n_t) (0 for a displacement-driven tendon), the displacement-driven
+    tendons' displacements [m] (k, n_d), those tendons (indices from 0) and the world-frame tip
+    force [N] (k, 3) of each row."""
 
     t: np.ndarray
     tensions: np.ndarray
+    displacements: np.ndarray
+    driven: tuple
     tip_force: np.ndarray
 
-    def at(self, times) -> tuple[np.ndarray, np.ndarray]:
-        """(tensions, tip force) at ``times`` [s], linear between rows, the last row held after it."""
+    def at(self, times) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(tensions, displacements, tip force) at ``times`` [s], linear between rows, the last row
+        held after it."""
 
         def columns(x):
-            return np.stack([np.interp(times, self.t, c) for c in x.T], axis=-1).reshape(len(times), x.shape[1])
+            return np.array([np.interp(times, self.t, c) for c in x.T]).T.reshape(len(times), x.shape[1])
 
-        return columns(self.tensions), columns(self.tip_force)
+        return columns(self.tensions), columns(self.displacements), columns(self.tip_force)
 
 
 def read_input_table(path, n_tendons: int) -> InputTable:
     """Reads ``tdct simulate``'s input table (docs/cli.md): a CSV whose first line names its columns,
-    ``t_s``, ``tension_1_N`` to ``tension_{n_tendons}_N`` and optionally ``tip_force_{x,y,z}_N``
-    (a missing one 0); blank lines and lines starting with '#' are skipped.
+    ``t_s``, for each tendon i either ``tension_{i}_N`` or ``displacement_{i}_mm`` (the length
+    pulled at the base), and optionally ``tip_force_{x,y,z}_N`` (a missing one 0); blank lines
+    and lines starting with '#' are skipped.
 
     Raises:
         ValueError: ``path:line: ...`` naming the column, the value and what is allowed: what
             ``recording._table`` refuses (an unreadable file, rows of another field count, no
             rows), a missing time column, a first time other than 0, times that do not
-            increase, unknown or missing columns (one tension column per tendon), a value that is
-            not a finite number, a negative tension.
+            increase, unknown or missing columns (one tension or displacement column per
+            tendon, not both), a value that is not a finite number, a negative tension.
     """
     path = Path(path)
     table = _table(path, "input table")
     header, names, rows = table.line, table.names, table.rows
     tensions = [f"tension_{i}_N" for i in range(1, n_tendons + 1)]
+    pulls = [f"displacement_{i}_mm" for i in range(1, n_tendons + 1)]
     robot = f"the robot has {n_tendons} tendon{'s' * (n_tendons != 1)}"
-    allowed = [TIME_COLUMN, *tensions, *TIP_FORCE_COLUMNS]
+    allowed = [TIME_COLUMN, *tensions, *pulls, *TIP_FORCE_COLUMNS]
     said = ", ".join(
         [TIME_COLUMN, *tensions[:1], *(["...", tensions[-1]] if n_tendons > 2 else tensions[1:]), *TIP_FORCE_COLUMNS]
     )
     for name in names:
         if name in allowed:
             continue
-        numbered = re.fullmatch(r"tension_(\d+)_N", name)
+        numbered = re.fullmatch(r"(tension|displacement)_(\d+)_(N|mm)", name)
         if numbered:
-            raise _error(path, header, f"column {name!r}: {robot}, so the tension columns are {', '.join(tensions) or 'none'}")
+            kind = f"{numbered[1]} columns are {', '.join(tensions if numbered[1] == 'tension' else pulls) or 'none'}"
+            raise _error(path, header, f"column {name!r}: {robot}, so the {kind}")
         close = [TIME_COLUMN] if re.fullmatch(r"t(ime)?(_\w*)?", name, re.I) else difflib.get_close_matches(name, allowed, n=1)
         guess = f" (did you mean {close[0]!r}?)" if close else ""
         hint = "; separate the columns by commas" if ";" in name or "\t" in name else ""
         raise _error(path, header, f"unknown column {name!r}{guess}; the columns are {said}{hint}")
     if TIME_COLUMN not in names:
         raise _error(path, header, f"no time column {TIME_COLUMN!r} (the times in seconds, from 0); columns present: {names}")
-    missing = [c for c in tensions if c not in names]
+    both = [i for i, (a, b) in enumerate(zip(tensions, pulls, strict=True)) if a in names and b in names]
+    if both:
+        i = both[0]
+        raise _error(
+            path,
+            header,
+            f"columns {tensions[i]} and {pulls[i]}: drive tendon {i + 1} by its tension or its displacement, not both",
+        )
+    missing = [c for c, d in zip(tensions, pulls, strict=True) if c not in names and d not in names]
     if missing:
         raise _error(
             path,
             header,
-            f"no column(s) {', '.join(missing)}: {robot}, one tension column each ({tensions[0]} to {tensions[-1]}, in N)",
+            f"no column(s) {', '.join(missing)}: {robot}, one tension column each ({tensions[0]} to {tensions[-1]}, in N) "
+            "or, for a displacement-driven tendon, displacement_i_mm",
         )
     index = {name: names.index(name) for name in names}
     values = {name: np.array([_number(path, line, name, f[index[name]]) for line, f in rows]) for name in names}
@@ -1083,15 +1101,18 @@ def read_input_table(path, n_tendons: int) -> InputTable:
         raise _error(
             path, lines[k], f"{TIME_COLUMN} = {t[k]:g} s is not after the row before's {t[k - 1]:g} s; the times must increase"
         )
-    for name in tensions:
+    for name in (c for c in tensions if c in names):
         negative = np.flatnonzero(values[name] < 0)
         if negative.size:
             k = negative[0]
             raise _error(path, lines[k], f"{name} = {values[name][k]:g} N is outside the allowed range [0, inf) N")
     zeros = np.zeros(len(rows))
+    driven = tuple(i for i, c in enumerate(pulls) if c in names)
     return InputTable(
         t,
-        np.stack([values[c] for c in tensions], axis=-1).reshape(len(rows), n_tendons),
+        np.stack([values.get(c, zeros) for c in tensions], axis=-1).reshape(len(rows), n_tendons),
+        1e-3 * np.array([values[pulls[i]] for i in driven]).T.reshape(len(rows), len(driven)),
+        driven,
         np.stack([values.get(c, zeros) for c in TIP_FORCE_COLUMNS], axis=-1),
     )
 
@@ -1115,7 +1136,7 @@ def _simulate_command(args) -> int:
         solver = SolverOptions(steps=solver.steps, max_iter=solver.max_iter, intervals=args.intervals)
     depths = _depths_typed(args, robot)
     try:
-        check_dynamics(robot, Loads(), solver)
+        check_dynamics(robot, Actuation.of(None, robot), Loads(), solver)
     except ValueError as e:
         raise ValueError(f"--robot {args.robot}: {e}" if args.robot else str(e)) from None
     table = read_input_table(args.inputs, robot.n_tendons)
@@ -1135,7 +1156,7 @@ def _simulate_command(args) -> int:
     if duration > table.t[-1]:
         print(f"tdct: note: the table ends at {table.t[-1]:g} s; its last row is held to {duration:g} s", file=sys.stderr)
     times = np.arange(steps + 1) * dt
-    tensions, tip_force = table.at(times)
+    tensions, displacements, tip_force = table.at(times)
     if not args.quiet:
         print(
             f"simulating {steps} steps of {args.dt_ms:g} ms to t = {times[-1]:g} s in one compiled program "
@@ -1148,6 +1169,8 @@ def _simulate_command(args) -> int:
         robot,
         dt,
         tensions=tensions,
+        displacements=displacements,
+        driven=table.driven,
         tip_force=tip_force,
         insertions=[d * 1e-3 for d in depths],
         start=args.start,
@@ -1217,20 +1240,21 @@ def _step_failure(traj, i: int, solver: SolverOptions, args) -> str:
 
 
 def _write_trajectory(out: Path, traj, tip_force, args, dt: float) -> list[Path]:
-    """trajectory.csv (t_s, tip in mm, the inputs, each step's result code) and trajectory.npz
+    """trajectory.csv (t_s, tip in mm, the tensions (found for displacement-driven tendons), every
+    tendon's displacement in mm, the tip force, each step's result code) and trajectory.npz
     (every Trajectory array and the tip force [N], SI units, and a JSON ``metadata`` entry with the
     units and the run's settings) in the folder ``out``; returns their paths."""
     out.mkdir(parents=True, exist_ok=True)
     n_t = traj.tensions.shape[1]
     names = [TIME_COLUMN, "tip_x_mm", "tip_y_mm", "tip_z_mm", *(f"tension_{i}_N" for i in range(1, n_t + 1))]
-    names += [*TIP_FORCE_COLUMNS, "result"]
-    table = np.column_stack([traj.t, 1e3 * traj.tip_position, traj.tensions, tip_force])
+    names += [*(f"displacement_{i}_mm" for i in range(1, n_t + 1)), *TIP_FORCE_COLUMNS, "result"]
+    table = np.column_stack([traj.t, 1e3 * traj.tip_position, traj.tensions, 1e3 * traj.displacements, tip_force])
     rows = [",".join([*(f"{v:.12g}" for v in row), str(int(code))]) for row, code in zip(table, traj.result, strict=True)]
     csv_path, npz_path = out / "trajectory.csv", out / "trajectory.npz"
     csv_path.write_text("\n".join([",".join(names), *rows]) + "\n")
     units = dict(
         t="s", s="m", position="m", rotation="1 (world from body)", force="N", moment="N m", velocity="m/s",
-        angular_velocity="rad/s", tensions="N", tip_force="N", iterations="Newton steps",
+        angular_velocity="rad/s", tensions="N", displacements="m", tip_force="N", iterations="chord and Newton steps",
         result="tdct_jax.status code, 0 converged", residual_norm="1 (scaled tip residual, max norm)",
     )  # fmt: skip
     metadata = dict(

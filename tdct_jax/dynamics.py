@@ -52,7 +52,7 @@ from .checks import as_array, check_range, is_concrete
 from .description import Robot
 from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
-from .segments import E3, Segment, State, body_strains
+from .segments import E3, Segment, State, body_strains, tendon_pb
 from .so3 import cayley, hat, orthonormalize, vee_skew
 from .solve import solve
 from .tree import pytree
@@ -93,18 +93,19 @@ STATIC = Scheme(0.0, 0.0, 0.0, 0.0)
 
 
 class Dyn(NamedTuple):
-    """The state along s: the static State y and the body-frame velocity q [m/s] and angular
-    velocity w [rad/s]."""
+    """The state along s: the static State y, the body-frame velocity q [m/s] and angular
+    velocity w [rad/s], and each tendon's rest length from the interval's start l [m] (n_t,)."""
 
     y: State
     q: jax.Array
     w: jax.Array
+    l: jax.Array
 
 
 class Layout(NamedTuple):
     """One time step's integration plan: per RK4 step (P intervals x ``steps``), its interval's
     parameters, start s0 [m], length h [m], the jump (dN, dM) and point mass [kg] at its start;
-    the jump and point mass at L."""
+    and the ``rod.Plan`` it was made from (its last jump and point mass act at L)."""
 
     P: rod.Interval
     s0: jax.Array
@@ -112,7 +113,7 @@ class Layout(NamedTuple):
     dN: jax.Array
     dM: jax.Array
     mass: jax.Array
-    tip: tuple
+    plan: rod.Plan | None
 
 
 def layout(robot: Robot, act: Actuation, load: Loads, gravity, steps: int) -> Layout:
@@ -132,7 +133,7 @@ def layout(robot: Robot, act: Actuation, load: Loads, gravity, steps: int) -> La
         jump(pl.dN),
         jump(pl.dM),
         jnp.where(first[..., 0], pl.mass[:-1, None], 0.0).reshape(-1),
-        (pl.dN[-1], pl.dM[-1], pl.mass[-1]),
+        pl,
     )
 
 
@@ -141,10 +142,12 @@ def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stage
     ``stages`` (v_h, u_h, q_h, w_h) (n, 4, 12). Returns the end, the nodes (n + 1 Dyn) and what
     the history is made of: each stage point's (v - e3, u, q, w) (the strain rather than v, so
     that c0 z + z_h does not cancel a unit vector's rounding times c0). A point mass m at a step's start
-    takes m (g - p_tt) from N, p_tt = R (q_t + w x q) there (stage 1's history)."""
+    takes m (g - p_tt) from N, p_tt = R (q_t + w x q) there (stage 1's history). The tendons' rest
+    lengths grow as in statics (``rod.integrate``: dl = |p_b| / (1 + tau / EA) where present)."""
     after = jnp.array([0.5, 0.5, 1.0])
     weights = jnp.array([1.0, 2.0, 2.0, 1.0]) / 6
     f_d = load.distributed_force
+    EA = rod.tendon_stiffness(robot) if robot.tendons else jnp.zeros(0)
 
     def field(P: rod.Interval, s, z_h, d: Dyn):
         seg = rod._segment(robot, P, s)
@@ -162,7 +165,8 @@ def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stage
         dM = -jnp.cross(dp, d.y.N) + R @ (P.rhoJ * w_t + jnp.cross(d.w, P.rhoJ * d.w))
         dq = v_t - jnp.cross(u, d.q) + jnp.cross(d.w, v)
         dw = u_t - jnp.cross(u, d.w)
-        return Dyn(State(dp, R @ hat(u), dN, dM), dq, dw), jnp.concatenate([v - E3, u, d.q, d.w])
+        dl = P.present * jnp.linalg.norm(tendon_pb(seg, v, u), axis=-1) / (1 + seg.tau / EA)
+        return Dyn(State(dp, R @ hat(u), dN, dM), dq, dw, dl), jnp.concatenate([v - E3, u, d.q, d.w])
 
     def step(d: Dyn, k):
         P, s0, h, dN, dM, m, z_h = k
@@ -195,13 +199,22 @@ N_START = 15
 
 
 class Unknowns(NamedTuple):
-    """One time step's unknowns: the scaled base wrench x (6,) (N(0) / F_c, M(0) / (F_c L)), and
-    with K shooting intervals (``solver.intervals``) each interior start's rotation R (K - 1, 3, 3)
-    and its (N, M, q, w) divided by ``_scale`` (K - 1, 12)."""
+    """One time step's unknowns: the scaled base wrench and driven tensions x (6 + n_d,) (N(0) /
+    F_c, M(0) / (F_c L), then each displacement-driven tendon's tension / F_c, as in statics'
+    ``rod.shoot``), and with K shooting intervals (``solver.intervals``) each interior start's
+    rotation R (K - 1, 3, 3) and its (N, M, q, w) divided by ``_scale`` (K - 1, 12)."""
 
     x: jax.Array
     R: jax.Array
     z: jax.Array
+
+    def physical(self, F_c, S) -> Unknowns:
+        """x times F_c and z times S: the units kept from one time step to the next, whose F_c
+        differs where the inputs change (``scaled`` the inverse)."""
+        return Unknowns(self.x * F_c, self.R, self.z * S[None])
+
+    def scaled(self, F_c, S) -> Unknowns:
+        return Unknowns(self.x / F_c, self.R, self.z / S[None])
 
 
 def _scale(F_c, L, dt):
@@ -210,85 +223,111 @@ def _scale(F_c, L, dt):
 
 
 class Problem(NamedTuple):
-    """One time step's boundary-value problem at given inputs: the robot, loads, gravity, layout,
-    scheme, history ((n_steps, 4, 12) stage points, (6,) tip), force scale F_c, ``_scale``, and K."""
+    """One time step's boundary-value problem at given inputs: the robot, actuation (tensions,
+    the driven tendons' commanded displacements), loads, gravity, scheme, history ((n_steps, 4,
+    12) stage points, (6,) tip), force scale F_c, ``_scale``, K and RK4 steps per breakpoint
+    interval."""
 
     robot: Robot
+    act: Actuation
     load: Loads
     gravity: jax.Array
-    lay: Layout
     c: Scheme
     history: tuple
     F_c: jax.Array
     S: jax.Array
     K: int
+    steps: int
 
-    def run(self, R, y):
+    def actuation(self, x) -> Actuation:
+        """The actuation with the driven tendons' tensions of the unknowns x."""
+        return rod.with_driven(self.act, x, self.F_c)
+
+    def layout(self, x) -> Layout:
+        return layout(self.robot, self.actuation(x), self.load, self.gravity, self.steps)
+
+    def run(self, lay: Layout, R, y):
         """The K intervals integrated side by side from their starts, rotations R (K, 3, 3) and
-        (N, M, q, w) y (K, 12), each from p = 0: ends, nodes (K, n_steps / K + 1) and stage values."""
+        (N, M, q, w) y (K, 12), each from p = 0 and l = 0: ends, nodes (K, n_steps / K + 1) and
+        stage values."""
         K = self.K
 
         def split(a):
             return a.reshape(K, -1, *a.shape[1:])
 
-        start = Dyn(State(jnp.zeros((K, 3)), R, y[:, :3], y[:, 3:6]), y[:, 6:9], y[:, 9:])
-        per = jax.tree.map(split, self.lay._replace(tip=()))
+        zeros = jnp.zeros((K, 3))
+        start = Dyn(State(zeros, R, y[:, :3], y[:, 3:6]), y[:, 6:9], y[:, 9:], jnp.zeros((K, self.robot.n_tendons)))
+        per = jax.tree.map(split, lay._replace(plan=None))
         integrate = jax.vmap(lambda lay, stages, d: _integrate(self.robot, self.load, self.gravity, lay, self.c, stages, d))
         return integrate(per, split(self.history[0]), start)
 
     def starts(self, u: Unknowns):
         """Every interval's start rotation (K, 3, 3) and (N, M, q, w) (K, 12); the base's R = I, q = w = 0."""
         R = jnp.concatenate([jnp.eye(3)[None], u.R])
-        return R, jnp.concatenate([jnp.concatenate([u.x, jnp.zeros(6)])[None], u.z]) * self.S[None]
+        return R, jnp.concatenate([jnp.concatenate([u.x[:6], jnp.zeros(6)])[None], u.z]) * self.S[None]
 
-    def closing(self, ends: Dyn, R_next):
+    def closing(self, lay: Layout, x, ends: Dyn, R_next, lengths=None):
         """Each interval's end against the next start, rotation vector of R_end R_next^T and
-        (N, M, q, w) / S (K, 15); and the scaled tip residual (6,) at the last end."""
-        dN_L, dM_L, m_L = self.lay.tip
+        (N, M, q, w) / S (K, 15); statics' scaled tip and driven-tendon rows (``rod.closing``)
+        at the last end, the tip's point mass taking m p_tt from N there, with the tendons' rest
+        lengths ``lengths`` (None: the intervals' summed); and each tendon's slack flag."""
         last = jax.tree.map(lambda a: a[-1], ends)
-        N_L = last.y.N + dN_L + m_L * _acceleration(self.c, last, self.history[1][:3])
-        M_L = last.y.M + dM_L
-        F_c, L = self.F_c, self.robot.length
-        tip = jnp.concatenate([(N_L - self.load.tip_force) / F_c, (M_L - self.load.tip_moment) / (F_c * L)])
+        N_L = last.y.N + lay.plan.mass[-1] * _acceleration(self.c, last, self.history[1][:3])
+        lengths = jnp.sum(ends.l, 0) if lengths is None else lengths
+        tail, slack = rod.closing(self.robot, self.actuation(x), self.load, lay.plan, last.y._replace(N=N_L), lengths, self.F_c)
         y = jnp.concatenate([ends.y.N, ends.y.M, ends.q, ends.w], -1) / self.S[None]
-        return jnp.concatenate([vee_skew(ends.y.R @ jnp.swapaxes(R_next, -1, -2)), y], -1), tip
+        return jnp.concatenate([vee_skew(ends.y.R @ jnp.swapaxes(R_next, -1, -2)), y], -1), tail, slack
 
     def residual(self, u: Unknowns):
-        """Continuity at every interior start ((K - 1) 15, flattened), then the tip's (6,); and
-        the run (ends, nodes, stage values)."""
-        out = self.run(*self.starts(u))
-        return _stacked(u, *self.closing(out[0], _next_rotations(u))), out
+        """Continuity at every interior start ((K - 1) 15, flattened), then the tip's (6,) and
+        the driven tendons' (n_d,); and the run (ends, nodes, stage values)."""
+        lay = self.layout(u.x)
+        out = self.run(lay, *self.starts(u))
+        return _stacked(u, *self.closing(lay, u.x, out[0], _next_rotations(u))[:2]), out
 
     def linearize(self, u: Unknowns):
         """The residual and its Jacobian in (x, each interior's rotation (I + w^) R, then z): one
         forward pass perturbing every interval's start alike (each end depends on its own start
-        only), its blocks set into the dense matrix."""
-        K = self.K
+        only) and the driven tensions, its blocks set into the dense matrix. The driven tendons'
+        rows depend on every interval's start through the summed lengths: their blocks are
+        d(row) / d(lengths) times each interval's d(l) / d(start)."""
+        K, n_d = self.K, len(self.act.driven)
         R, y = self.starts(u)
         R_next = _next_rotations(u)
         base = slice(3, 9)  # the base wrench among a start's perturbations
         E = jnp.eye(N_START)[:, base] if K == 1 else jnp.eye(N_START)
+        m = E.shape[1]
 
         def ends(w):
-            v = E @ w
-            out = self.closing(self.run(R + hat(v[:3])[None] @ R, y + (v[3:] * self.S)[None])[0], R_next)
-            return out, out
+            v = E @ w[:m]
+            x = u.x.at[6:].add(w[m:])
+            lay = self.layout(x)
+            run = self.run(lay, R + hat(v[:3])[None] @ R, y + (v[3:] * self.S)[None])[0]
+            out = (*self.closing(lay, x, run, R_next)[:2], run.l)
+            return out, (*out, lay, run)
 
-        (G, T), (cont, tip) = jax.jacfwd(ends, has_aux=True)(jnp.zeros(E.shape[1]))
+        (G, T, Gl), (cont, tail, l, lay, run) = jax.jacfwd(ends, has_aux=True)(jnp.zeros(m + n_d))
+        lengths = jnp.sum(l, 0)
+        dl = jax.jacfwd(lambda lengths: self.closing(lay, u.x, run, R_next, lengths)[1][6:])(lengths)
 
-        def columns(k):  # interval k's start unknowns: x for the first
-            return slice(0, 6) if k == 0 else slice(6 + N_START * (k - 1), 6 + N_START * k)
+        def columns(k):  # interval k's start unknowns: the base wrench for the first
+            return slice(0, 6) if k == 0 else slice(6 + n_d + N_START * (k - 1), 6 + n_d + N_START * k)
 
         def own(k, block):  # d(interval k's end) / d(its start's unknowns)
-            return block[..., base] if k == 0 and K > 1 else block
+            return block[..., :m][..., base] if k == 0 and K > 1 else block[..., :m]
 
-        n = 6 + N_START * (K - 1)
+        tensions = slice(6, 6 + n_d)
+        n = 6 + n_d + N_START * (K - 1)
         J = jnp.zeros((n, n))
         for k in range(K - 1):
             rows = slice(N_START * k, N_START * (k + 1))
             J = J.at[rows, columns(k)].set(own(k, G[k])).at[rows, columns(k + 1)].set(-jnp.eye(N_START))
-        J = J.at[n - 6 :, columns(K - 1)].set(own(K - 1, T))
-        return _stacked(u, cont, tip), J
+            J = J.at[rows, tensions].set(G[k][:, m:])
+        tip = n - 6 - n_d
+        J = J.at[tip:, tensions].set(T[:, m:]).at[tip : tip + 6, columns(K - 1)].set(own(K - 1, T[:6]))
+        for k in range(K if n_d else 0):
+            J = J.at[tip + 6 :, columns(k)].set(dl @ own(k, Gl[k]))
+        return _stacked(u, cont, tail), J
 
 
 def _next_rotations(u: Unknowns):
@@ -296,11 +335,11 @@ def _next_rotations(u: Unknowns):
     return jnp.concatenate([u.R, jnp.eye(3)[None]])
 
 
-def _stacked(u: Unknowns, cont, tip):
+def _stacked(u: Unknowns, cont, tail):
     """The residual vector from ``Problem.closing``'s: each interior start's gap ((K - 1) 15),
-    then the tip's (6,)."""
+    then the tip's and the driven tendons' rows (6 + n_d,)."""
     gap = cont[:-1] - jnp.concatenate([jnp.zeros((u.z.shape[0], 3)), u.z], -1)
-    return jnp.concatenate([gap.reshape(-1), tip])
+    return jnp.concatenate([gap.reshape(-1), tail])
 
 
 def _update(u: Unknowns, r, J, mu):
@@ -315,8 +354,9 @@ def _update(u: Unknowns, r, J, mu):
 
 def _move(u: Unknowns, d) -> Unknowns:
     """u moved by d in ``Problem.linearize``'s coordinates; rotations by the Cayley map."""
-    inner = d[6:].reshape(-1, N_START)
-    return Unknowns(u.x + d[:6], cayley(inner[:, :3]) @ u.R, u.z + inner[:, 3:])
+    n_x = u.x.size
+    inner = d[n_x:].reshape(-1, N_START)
+    return Unknowns(u.x + d[:n_x], cayley(inner[:, :3]) @ u.R, u.z + inner[:, 3:])
 
 
 def _extrapolate(u: Unknowns, before: Unknowns) -> Unknowns:
@@ -330,7 +370,8 @@ def _at_rotations(v, R_ref) -> Unknowns:
     """The Unknowns of a vector (x, then each interior's Cayley vector of R R_ref^T and z): the
     coordinates in which ``lax.custom_root`` differentiates the root (``_vector`` the inverse at
     R = R_ref)."""
-    return _move(Unknowns(jnp.zeros(6), R_ref, jnp.zeros((R_ref.shape[0], 12))), v)
+    n_x = v.size - N_START * R_ref.shape[0]
+    return _move(Unknowns(jnp.zeros(n_x), R_ref, jnp.zeros((R_ref.shape[0], 12))), v)
 
 
 def _vector(u: Unknowns):
@@ -346,8 +387,11 @@ class StepInfo(NamedTuple):
 
 def _newton(problem: Problem, u0: Unknowns, solver: SolverOptions):
     """``newton.damped`` (Levenberg-Marquardt, so that a sudden input does not throw the first
-    iterate far off) on the problem: the point, Newton steps and the status code."""
-    u, r, _, steps, code = newton.damped(problem.linearize, _update, u0, solver.tol, solver.max_iter)
+    iterate far off) on the problem, its steps judged by the natural level (a displacement
+    row's residual is a gap of micrometres where a tension error of newtons makes it, beside
+    force rows that a Newton step's second order can raise): the point, Newton steps and the
+    status code."""
+    u, r, _, steps, code = newton.damped(problem.linearize, _update, u0, solver.tol, solver.max_iter, natural=True)
     code = jnp.where(code == status.SUCCESS, code, jnp.where(jnp.all(jnp.isfinite(r)), status.NEWTON_LIMIT, status.NONFINITE))
     return u, jnp.asarray(steps, jnp.int32), code.astype(jnp.int32)
 
@@ -357,7 +401,8 @@ def _step(problem_at, guess: Unknowns, previous: Unknowns, solver: SolverOptions
     inputs scaled by lam (1: the step's own), its inputs without derivatives where ``frozen``.
 
     First up to CHORD_STEPS chord steps from ``guess`` with the Jacobian there, each checked by a
-    primal pass (a Jacobian pass costs about four), while each lowers the residual: where they
+    primal pass (a Jacobian pass costs about four), while each shortens the chord correction
+    (the natural level |J^-1 r|, as in ``_newton``): where they
     reach the tolerance, the step is done. Else Newton (``_newton``) from the best point; where it
     fails, load continuation as in statics from
     the last step's root ``previous``: ``solver.stages`` ramps of equal stages in turn, each stage
@@ -375,17 +420,19 @@ def _step(problem_at, guess: Unknowns, previous: Unknowns, solver: SolverOptions
     factors = jax.scipy.linalg.lu_factor(J)
 
     def chord(state):
-        u, r, k, _ = state
-        u_new = _move(u, -jax.scipy.linalg.lu_solve(factors, r))
+        u, r, d, k, _ = state
+        u_new = _move(u, -d)
         r_new = full.residual(u_new)[0]
-        lower = jnp.all(jnp.isfinite(r_new)) & (jnp.sum(r_new**2) < jnp.sum(r**2))
-        return (*jax.tree.map(lambda a, b: jnp.where(lower, a, b), (u_new, r_new), (u, r)), k + 1, lower)
+        d_new = jax.scipy.linalg.lu_solve(factors, r_new)
+        lower = jnp.all(jnp.isfinite(r_new)) & (jnp.sum(d_new**2) < jnp.sum(d**2))
+        return (*jax.tree.map(lambda a, b: jnp.where(lower, a, b), (u_new, r_new, d_new), (u, r, d)), k + 1, lower)
 
     def chording(state):
-        _, r, k, lower = state
+        _, r, _, k, lower = state
         return lower & (k < CHORD_STEPS) & (jnp.max(jnp.abs(r)) > solver.tol)
 
-    guess, r, chords, _ = lax.while_loop(chording, chord, (guess, r, jnp.int32(0), jnp.bool_(True)))
+    begin = (guess, r, jax.scipy.linalg.lu_solve(factors, r), jnp.int32(0), jnp.bool_(True))
+    guess, r, _, chords, _ = lax.while_loop(chording, chord, begin)
 
     def attempt(state):
         a, _, iterations, _ = state
@@ -435,7 +482,10 @@ class Trajectory:
         force, moment: the total internal force N [N] and moment M [N m] of rod plus tendons
             (at s = 0 the load on the base), (n, m, 3).
         velocity: p_t [m/s] and angular_velocity: R w [rad/s], (n, m, 3).
-        tensions: the tendon tensions [N], (n, n_t).
+        tensions: the tendon tensions [N], (n, n_t): the given ones and those found for
+            displacement-driven tendons (slack: 0).
+        displacements: what each tendon's encoder reads [m], (n, n_t): its rest length inside
+            the straight robot less its present one (``rod.displacements``).
         iterations: chord and Newton steps of each time step (n,) (``_step``), 0 at the start.
         result: each time step's status code (n,) (``tdct_jax.status``), SUCCESS (0) when its
             scaled residual reached ``solver.tol``.
@@ -451,6 +501,7 @@ class Trajectory:
     velocity: jax.Array
     angular_velocity: jax.Array
     tensions: jax.Array
+    displacements: jax.Array
     iterations: jax.Array
     result: jax.Array
     residual_norm: jax.Array
@@ -466,13 +517,14 @@ class Trajectory:
         return self.position[..., -1, :]
 
 
-def _inputs(robot: Robot, load: Loads, given: dict, n: int | None):
-    """The per-time inputs (tensions, tip force and moment, the point loads' forces and moments)
-    as arrays with a leading time axis of n rows (constants broadcast along time), and n; a
-    point load's None is ``load``'s own."""
+def _inputs(robot: Robot, load: Loads, driven: tuple, given: dict, n: int | None):
+    """The per-time inputs (tensions, the driven tendons' displacements, tip force and moment,
+    the point loads' forces and moments) as arrays with a leading time axis of n rows (constants
+    broadcast along time), and n; a point load's None is ``load``'s own."""
     k = np.size(load.point_s)
     shapes = {
         "tensions": ((robot.n_tendons,), " N", None),
+        "displacements": ((len(driven),), " m", None),
         "tip_force": ((3,), " N", None),
         "tip_moment": ((3,), " N m", None),
         "point_force": ((k, 3), " N", load.point_force),
@@ -498,14 +550,16 @@ def _inputs(robot: Robot, load: Loads, given: dict, n: int | None):
     return [jnp.broadcast_to(x, (n, *shapes[name][0])) for name, x in rows.items()], n
 
 
-def check(robot: Robot, load: Loads, solver: SolverOptions) -> None:
-    """What ``simulate`` does not handle yet, refused by name."""
+def check(robot: Robot, act: Actuation, load: Loads, solver: SolverOptions) -> None:
+    """What ``simulate`` does not handle yet, refused by name; statics' checks of robot and inputs
+    together (``act``: the driven tendons' largest displacements)."""
     if robot.has_friction:
         raise ValueError("sections[*].friction: tendon friction is not simulated yet; give none")
     if load.scene is not None:
         raise ValueError("scene: contact is not simulated yet")
     if solver.transition != "balanced" or solver.tendon_model != "exact":
         raise ValueError("solver: simulate uses the 'balanced' transition and 'exact' tendons")
+    rod.check_arguments(robot, act, load, solver)
     rod.check_intervals(robot, load, solver)
 
 
@@ -515,6 +569,8 @@ def simulate(
     steps: int | None = None,
     *,
     tensions=None,
+    displacements=None,
+    driven: tuple = (),
     tip_force=None,
     tip_moment=None,
     point_force=None,
@@ -528,14 +584,20 @@ def simulate(
     throw: bool = True,
     checkpoint: bool = False,
 ) -> Trajectory:
-    """The robot's motion under time-varying tendon tensions and tip loads (module docstring).
+    """The robot's motion under time-varying tendon tensions or displacements and loads (module
+    docstring).
 
     Args:
         robot: any robot of the description; ``Section.damping`` sets material damping.
         dt: time step [s].
         steps: number of time steps; None: the inputs' time axis (its length less one: row 0 is
             the start).
-        tensions: tendon tensions [N], (n_t,) for all times or (steps + 1, n_t), row i at t = i dt.
+        tensions: tendon tensions [N], (n_t,) for all times or (steps + 1, n_t), row i at t = i dt;
+            a displacement-driven tendon's are not used.
+        displacements: the driven tendons' displacements [m] (the length pulled at the base, as
+            ``Actuation.displacements``), (n_d,) or (steps + 1, n_d); their tensions are found at
+            each step, 0 where the tendon goes slack (statics' complementarity row).
+        driven: indices of the displacement-driven tendons, 0 for tendon 1.
         tip_force, tip_moment: world-frame tip load [N], [N m], (3,) or (steps + 1, 3).
         point_force, point_moment: world-frame forces [N] and moments [N m] of ``load``'s k point
             loads (at ``load.point_s``, fixed), (k, 3) or (steps + 1, k, 3): e.g. held at the start
@@ -572,37 +634,46 @@ def simulate(
     if steps is not None:
         steps = int(steps)
         check_range("steps", steps, 1)
-    given = {"tensions": tensions, "tip_force": tip_force, "tip_moment": tip_moment}
+    driven = tuple(int(i) for i in driven)
+    given = {"tensions": tensions, "displacements": displacements, "tip_force": tip_force, "tip_moment": tip_moment}
     given |= {"point_force": point_force, "point_moment": point_moment}
-    rows, n = _inputs(robot, load, given, None if steps is None else steps + 1)
-    T, F, C, PF, PM = rows
-    act = Actuation(T[0], jnp.zeros(robot.n_tubes) if insertions is None else insertions)
-    check(robot, load, solver)
+    rows, n = _inputs(robot, load, driven, given, None if steps is None else steps + 1)
+    T, D, F, C, PF, PM = rows
+    depths = jnp.zeros(robot.n_tubes) if insertions is None else insertions
+    act = Actuation(T[0], depths, D[0], driven)
+    check(robot, Actuation(T[0], depths, jnp.max(D, 0), driven), load, solver)
     g = gravity_vector(gravity)
-    base = jnp.concatenate([F[0], C[0] + jnp.cross(robot.length * E3, F[0])])  # the tip load carried to the base
+    base = jnp.concatenate(
+        [F[0], C[0] + jnp.cross(robot.length * E3, F[0]), T[0, np.asarray(driven, int)]]
+    )  # the tip load carried to the base
     if start == "static":  # the static solver's load continuation finds the start
         held = load._with(point_force=PF[0], point_moment=PM[0]).with_tip(F[0], C[0])
-        base = solve(robot, act, held, gravity=g, solver=solver, throw=throw).base_wrench
-    out = _simulate(robot, act.insertions, load, (T, F, C, PF, PM), dt, alpha, g, base, solver, start == "static", checkpoint)
+        found = solve(robot, act, held, gravity=g, solver=solver, throw=throw)
+        base = jnp.concatenate([found.base_wrench, found.tensions[np.asarray(driven, int)]])
+    out = _simulate(robot, act, load, rows, dt, alpha, g, base, solver, start == "static", checkpoint)
     if throw and is_concrete(out.result):
         failed = np.flatnonzero(np.asarray(out.result) != status.SUCCESS)
         if failed.size:
             i = int(failed[0])
+            context = dict(max_iter=solver.max_iter, tol=solver.tol, stages=max(solver.stages))
+            context |= dict(residual_norm=float(out.residual_norm[i]), iterations=int(out.iterations[i]))
+            advice = "Try more solver.intervals (multiple shooting), a ramped input or more solver.max_iter"
             raise status.ConvergenceError(
                 f"simulate: time step {i} (t = {float(out.t[i]):g} s) did not converge: "
-                f"{status.message(int(out.result[i]), what='its Newton iteration', max_steps=solver.max_iter)}; "
-                "try more solver.intervals (multiple shooting), a ramped input or more solver.max_iter",
+                f"{status.message(int(out.result[i]), raise_max_iter=advice, **context)}",
                 int(out.result[i]),
             )
     return out
 
 
 @jax.jit(static_argnames=("solver", "static_start", "checkpoint"))
-def _simulate(robot, insertions, load, rows, dt, alpha, gravity, base, solver, static_start, checkpoint):
+def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_start, checkpoint):
     """``simulate``'s compiled part: one scan over the time rows, each an implicit step (the first,
     with ``static_start``, the static root: every coefficient zero), so that the root and the
-    sweep are compiled once; ``base``: the base wrench (N(0), M(0)) the first Newton starts from,
-    the interior starts (multiple shooting) from one static pass from it."""
+    sweep are compiled once; ``act``: the insertions and the driven tendons; ``base``: the base
+    wrench (N(0), M(0)) and driven tensions the first Newton starts from, the interior starts
+    (multiple shooting) from one static pass from it. The roots pass from step to step in
+    physical units (``Unknowns.physical``)."""
     K = solver.intervals
     n_nodes = rod.n_intervals(robot, load) * solver.steps
     c = scheme(dt, alpha)
@@ -612,49 +683,57 @@ def _simulate(robot, insertions, load, rows, dt, alpha, gravity, base, solver, s
     def inputs(i, lam=1.0):
         """Row i's inputs, or with lam < 1 those of row i - 1 moved lam of the way to row i."""
         j = jnp.maximum(i - 1, 0)
-        T_i, F_i, C_i, PF_i, PM_i = (a[j] + lam * (a[i] - a[j]) for a in rows)
+        T_i, D_i, F_i, C_i, PF_i, PM_i = (a[j] + lam * (a[i] - a[j]) for a in rows)
         ld = load._with(point_force=PF_i, point_moment=PM_i).with_tip(F_i, C_i)
-        return Actuation._rebuild(T_i, insertions, jnp.zeros(0), ()), ld
+        return Actuation._rebuild(T_i, act.insertions, D_i, act.driven), ld
 
     def problem(i, c_i, history, lam=1.0, frozen=False):
-        act, ld = inputs(i, lam)
-        parts = (robot, act, ld, gravity, c_i, history)
-        robot_, act, ld, gravity_, c_i, history = lax.stop_gradient(parts) if frozen else parts
-        F_c = rod.force_scale(robot_, act, ld, gravity_)
-        lay = layout(robot_, act, ld, gravity_, solver.steps)
-        return Problem(robot_, ld, gravity_, lay, c_i, history, F_c, _scale(F_c, L, dt), K)
+        act_i, ld = inputs(i, lam)
+        parts = (robot, act_i, ld, gravity, c_i, history)
+        robot_, act_i, ld, gravity_, c_i, history = lax.stop_gradient(parts) if frozen else parts
+        F_c = rod.force_scale(robot_, act_i, ld, gravity_)
+        return Problem(robot_, act_i, ld, gravity_, c_i, history, F_c, _scale(F_c, L, dt), K, solver.steps)
 
     def advance(carry, i):
         (u, before), z1, z2, zt1 = carry
         ci = jax.tree.map(lambda a: jnp.where(i == 0, 0.0, a), c)
         history = jax.tree.map(lambda a, b, d: ci.c1 * a + ci.c2 * b + ci.d1 * d, z1, z2, zt1)
+        at = problem(i, ci, history)
         guess = jax.tree.map(lambda e, a: jnp.where(i > 1, e, a), _extrapolate(u, before), u)
-        root, info, (ends, nodes, z) = _step(lambda lam, frozen=False: problem(i, ci, history, lam, frozen), guess, u, solver)
-        offsets = jnp.cumsum(ends.y.p, 0) - ends.y.p  # each interval ran from p = 0
-        nodes = nodes._replace(y=nodes.y._replace(p=nodes.y.p + offsets[:, None]))
+        guess, previous = (v.scaled(at.F_c, at.S) for v in (guess, u))
+        root, info, (ends, nodes, z) = _step(
+            lambda lam, frozen=False: problem(i, ci, history, lam, frozen), guess, previous, solver
+        )
+        offsets = jnp.cumsum(ends.y.p, 0) - ends.y.p  # each interval ran from p = 0 and l = 0
+        lengths = jnp.cumsum(ends.l, 0) - ends.l
+        nodes = nodes._replace(y=nodes.y._replace(p=nodes.y.p + offsets[:, None]), l=nodes.l + lengths[:, None])
         nodes = jax.tree.map(lambda a: jnp.concatenate([a[:, :-1].reshape(-1, *a.shape[2:]), a[-1, -1:]]), nodes)
         z = (z.reshape(n_nodes, 4, 12), jnp.concatenate([ends.q[-1], ends.w[-1]]))
         zt = jax.tree.map(lambda a, b: ci.c0 * a + b, z, history)
-        return ((root, u), z, jax.tree.map(lambda a, b: jnp.where(i == 0, a, b), z, z1), zt), (nodes, info)
+        slack = at.closing(at.layout(root.x), root.x, ends, _next_rotations(root))[2]
+        out = (nodes, jnp.where(slack, 0.0, at.actuation(root.x).tensions), info)  # slack: 0, as in statics
+        return ((root.physical(at.F_c, at.S), u), z, jax.tree.map(lambda a, b: jnp.where(i == 0, a, b), z, z1), zt), out
 
     act0, load0 = inputs(0)
-    F_c0 = rod.force_scale(robot, act0, load0, gravity)
-    x0 = jnp.concatenate([base[:3], base[3:] / L]) / F_c0
     rest = (jnp.zeros((n_nodes, 4, 12)), jnp.zeros(6))
-    lay0 = layout(robot, act0, load0, gravity, solver.steps)
-    at_base = Dyn(State(jnp.zeros(3), jnp.eye(3), base[:3], base[3:]), jnp.zeros(3), jnp.zeros(3))
-    y = _integrate(robot, load0, gravity, lay0._replace(tip=()), STATIC, rest[0], at_base)[1]
+    lay0 = layout(robot, rod.with_driven(act0, base, 1.0), load0, gravity, solver.steps)
+    zeros = jnp.zeros(3)
+    at_base = Dyn(State(zeros, jnp.eye(3), base[:3], base[3:6]), zeros, zeros, jnp.zeros(robot.n_tendons))
+    y = _integrate(robot, load0, gravity, lay0._replace(plan=None), STATIC, rest[0], at_base)[1]
     inner = jax.tree.map(lambda a: a[n_nodes // K : n_nodes : n_nodes // K], y)
-    z0 = jnp.concatenate([inner.y.N, inner.y.M, inner.q, inner.w], -1) / _scale(F_c0, L, dt)[None]
-    u0 = Unknowns(x0, inner.y.R, z0)
+    u0 = Unknowns(base.at[3:6].divide(L), inner.y.R, jnp.concatenate([inner.y.N, inner.y.M, inner.q, inner.w], -1))
     start = ((u0, u0), rest, rest, jax.tree.map(jnp.zeros_like, rest))
     step = jax.checkpoint(advance) if checkpoint else advance
-    _, (nodes, info) = lax.scan(step, start, jnp.arange(0 if static_start else 1, T.shape[0]))
+    _, (nodes, tensions, info) = lax.scan(step, start, jnp.arange(0 if static_start else 1, T.shape[0]))
     s = jnp.concatenate([lay0.s0, L[None]])
+    displacements = jax.vmap(lambda l: rod.displacements(robot, l))(nodes.l[:, -1])
     if not static_start:  # the straight, unstrained robot at rest
-        zeros = jnp.zeros((s.size, 3))
-        straight = Dyn(State(s[:, None] * E3, jnp.broadcast_to(jnp.eye(3), (s.size, 3, 3)), zeros, zeros), zeros, zeros)
-        nodes = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), straight, nodes)
+        n = s.size
+        zeros = jnp.zeros((n, 3))
+        straight = Dyn(State(s[:, None] * E3, jnp.broadcast_to(jnp.eye(3), (n, 3, 3)), zeros, zeros), zeros, zeros, None)
+        nodes = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), straight, nodes._replace(l=None))
+        tensions = jnp.concatenate([T[:1], tensions])
+        displacements = jnp.concatenate([jnp.zeros((1, robot.n_tendons)), displacements])
         first = StepInfo(jnp.int32(0), jnp.int32(status.SUCCESS), jnp.zeros(()))
         info = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), first, info)
     y = nodes.y
@@ -667,7 +746,8 @@ def _simulate(robot, insertions, load, rows, dt, alpha, gravity, base, solver, s
         y.M,
         jnp.einsum("...ij,...j->...i", y.R, nodes.q),
         jnp.einsum("...ij,...j->...i", y.R, nodes.w),
-        T,
+        tensions,
+        displacements,
         info.iterations,
         info.result,
         info.residual_norm,

@@ -79,11 +79,14 @@ def _jacobian_shapes(F, x, fixed=None):
     return out[0], J if fixed is None else (J, out[1])
 
 
-def damped(linearize, step, x0, tol, max_iter, shapes=None):
+def damped(linearize, step, x0, tol, max_iter, shapes=None, natural=False):
     """The Levenberg-Marquardt loop of ``newton`` for any linearisation: ``linearize(x)`` gives
     (residual, J), ``step(x, residual, J, mu)`` the next point to try with damping mu; x may be a
     pytree (e.g. with rotations, updated on SO(3) by ``step``). ``shapes``: those of (residual, J)
-    when known, else from a trace of ``linearize``. Returns what ``newton`` returns."""
+    when known, else from a trace of ``linearize``. A step is taken where it lowers |r|^2; with
+    ``natural`` (J a matrix), an undamped one (mu <= MU_START, as ``step`` makes it) where it
+    lowers Deuflhard's natural level |J^-1 r|^2 at the last point's J, which no scaling of the
+    rows changes. Returns what ``newton`` returns."""
 
     def not_done(c):
         x, r, J, mu, it, x_try = c
@@ -92,7 +95,11 @@ def damped(linearize, step, x0, tol, max_iter, shapes=None):
     def body(c):
         x, r, J, mu, it, x_try = c
         r_try, J_try = linearize(x_try)
-        ok = jnp.all(jnp.isfinite(r_try)) & (jnp.sum(r_try**2) < jnp.sum(r**2))
+        lower = jnp.sum(r_try**2) < jnp.sum(r**2)
+        if natural:
+            level = jnp.sum(jnp.linalg.solve(J, r_try) ** 2) < jnp.sum(jnp.linalg.solve(J, r) ** 2)
+            lower = jnp.where((it > 0) & (mu <= MU_START), level, lower)
+        ok = jnp.all(jnp.isfinite(r_try)) & lower
         x, r, J = jax.tree.map(lambda new, old: jnp.where(ok, new, old), (x_try, r_try, J_try), (x, r, J))
         mu = jnp.where(ok, mu / 10, mu * 10)
         return x, r, J, mu, it + 1, step(x, r, J, mu)

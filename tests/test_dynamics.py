@@ -3,12 +3,15 @@ theory, the scheme's order in dt, its numerical dissipation, Kelvin-Voigt decay 
 closed form, settling onto the static solution, global momentum balance and exact derivatives
 of a trajectory loss. One robot and one step count: one compiled simulation (two with grad)."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import tdct_jax as tdct
+from tdct_jax import dynamics, status
 from tdct_jax.dynamics import simulate
 
 L, D, E, RHO = 0.3, 2e-3, 200e9, 7800.0
@@ -138,6 +141,33 @@ def test_a_damped_pull_settles_onto_the_static_solution():
     np.testing.assert_allclose(traj.force[-1, 0], static.total_force[0], rtol=0, atol=1e-9)
 
 
+def test_a_displacement_driven_pull_retraces_the_tension_driven_one_and_settles_onto_solve():
+    """The encoder readings (``Trajectory.displacements``) of a damped smooth 2 N pull under
+    gravity, commanded back as the tendon's displacement, give back its tensions and tips; a
+    displacement ramped in the same way settles onto ``solve``'s displacement-driven equilibrium,
+    and one below the sagging rod's own reading slackens the tendon (tension exactly 0)."""
+    damped = robot(2 / OMEGA[0])
+    g = (0.0, -9.81, 0.0)
+    t = np.arange(STEPS + 1) * T1 / 20
+    ramp = (np.sin(np.pi * np.minimum(t / T1, 0.5)) ** 2)[:, None]
+    pulled = simulate(damped, T1 / 20, tensions=2.0 * ramp, gravity=g, solver=SOLVER)
+    encoder = np.asarray(pulled.displacements)
+    assert encoder[-1, 0] - encoder[0, 0] > 5e-5  # 2 N bends the rod: the tendon's path shortens ~0.1 mm
+
+    def driven(displacements):
+        return simulate(damped, T1 / 20, displacements=displacements, driven=(0,), tensions=[0.0], gravity=g, solver=SOLVER)
+
+    back = driven(encoder)
+    np.testing.assert_allclose(back.tensions, 2.0 * ramp, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(back.tip_position, pulled.tip_position, rtol=0, atol=1e-10)
+    for end in (encoder[0, 0] + 1.5 * (encoder[-1, 0] - encoder[0, 0]), encoder[0, 0] - 1e-4):
+        settled = driven(encoder[0, 0] + (end - encoder[0, 0]) * ramp)
+        static = tdct.solve(damped, tdct.Actuation([0.0], displacements=[end], driven=(0,)), gravity=g, solver=SOLVER)
+        np.testing.assert_allclose(settled.tip_position[-1], static.tip_position, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(settled.tensions[-1], static.tensions, rtol=0, atol=1e-7)
+    assert static.tensions[0] == 0.0 and settled.tensions[-1, 0] == 0.0  # the last: slack
+
+
 def test_a_point_load_held_then_removed_under_tilted_gravity():
     """A critically damped rod, gravity tilted off every axis, a point force at mid-span held for
     the first rows: held, the rod stays at rest in ``solve``'s equilibrium with the force (no
@@ -232,6 +262,9 @@ def test_derivatives_through_multiple_shooting_match_central_differences():
         ({"tensions": np.zeros((5, 1)), "tip_force": np.zeros((6, 3))}, "tensions has 5 rows: one per time, 6"),
         ({"start": "moving"}, "start = 'moving'"),
         ({"tensions": [-1.0]}, "tensions"),
+        ({"displacements": [1e-3], "driven": (1,)}, "driven = (1,): the robot has 1 tendons"),
+        ({"displacements": [0.5], "driven": (0,)}, "displacements[0] (tendons[0]) = 0.5 is outside"),
+        ({"displacements": [1e-3]}, "displacements has shape (1,): (0,)"),
     ],
 )
 def test_bad_input_is_refused_by_name(kw, words):
@@ -240,6 +273,20 @@ def test_bad_input_is_refused_by_name(kw, words):
     with pytest.raises(ValueError, match=None) as e:
         simulate(robot(), dt, None if "tensions" in args and np.ndim(args["tensions"]) == 2 else steps, **args)
     assert words in str(e.value)
+
+
+def test_a_step_that_does_not_converge_raises_naming_its_time_and_numbers(runs, monkeypatch):
+    traj = runs[(50, 0.0)]
+    broken = dataclasses.replace(
+        traj, result=traj.result.at[7:].set(status.NEWTON_LIMIT), residual_norm=traj.residual_norm.at[7].set(1e-3)
+    )
+    monkeypatch.setattr(dynamics, "_simulate", lambda *args, **kwargs: broken)
+    with pytest.raises(status.ConvergenceError) as e:
+        free(50)
+    words = str(e.value)
+    assert words.startswith(f"simulate: time step 7 (t = {7 * T1 / 50:g} s) did not converge: Newton limit reached")
+    assert "max_iter = 50 steps" in words and "(0.001) below tol = 1e-10" in words and "?" not in words
+    assert words.endswith("Try more solver.intervals (multiple shooting), a ramped input or more solver.max_iter.")
 
 
 def test_what_is_not_simulated_yet_is_refused():

@@ -76,6 +76,11 @@ BAD_TABLES = [
     ("t_s,tension_1_N,tip_torque_N\n0,0,0\n", "inputs.csv:1: unknown column 'tip_torque_N'"),
     ("t_s,tension_1_N\n0,0\n0.01,1\n0.02,-0.5\n", "inputs.csv:4: tension_1_N = -0.5 N is outside the allowed range [0, inf) N"),
     ("t_s,tension_1_N,tension_2_N\n0,0,0\n", "inputs.csv:1: column 'tension_2_N': the robot has 1 tendon, so the tension"),
+    ("t_s,displacement_2_mm\n0,0\n", "column 'displacement_2_mm': the robot has 1 tendon, so the displacement columns are"),
+    (
+        "t_s,tension_1_N,displacement_1_mm\n0,0,0\n",
+        "inputs.csv:1: columns tension_1_N and displacement_1_mm: drive tendon 1 by its tension or its displacement",
+    ),
     (
         "t_s,tip_force_y_N\n0,0\n0.01,1\n",
         "inputs.csv:1: no column(s) tension_1_N: the robot has 1 tendon, one tension column each",
@@ -139,6 +144,19 @@ def test_unreadable_table_and_robot_with_friction_are_refused(files, tmp_path, c
     )
 
 
+def test_displacement_columns_drive_their_tendons_in_metres(tmp_path):
+    """A displacement_i_mm column makes tendon i displacement-driven: its values in metres,
+    interpolated like the tensions; the other tendons keep their tension columns."""
+    path = tmp_path / "pulls.csv"
+    path.write_text("t_s,displacement_1_mm,tension_2_N,tension_3_N\n0,0,0,0\n0.1,2,0,1.5\n")
+    table = cli.read_input_table(path, 3)
+    assert table.driven == (0,)
+    tensions, displacements, force = table.at(np.array([0.0, 0.05, 0.2]))
+    np.testing.assert_allclose(displacements[:, 0], [0.0, 1e-3, 2e-3], rtol=1e-12)
+    np.testing.assert_allclose(tensions, [[0, 0, 0], [0, 0, 0.75], [0, 0, 1.5]], rtol=1e-12)
+    assert not force.any()
+
+
 # ---- one short simulation ---------------------------------------------------------------------
 
 
@@ -152,17 +170,29 @@ def test_simulation_writes_the_api_trajectory_a_figure_and_a_gif(files, api, tmp
     assert bool(api.converged)
 
     header, *rows = (out / "trajectory.csv").read_text().splitlines()
-    names = "t_s,tip_x_mm,tip_y_mm,tip_z_mm,tension_1_N,tip_force_x_N,tip_force_y_N,tip_force_z_N,result"
+    names = "t_s,tip_x_mm,tip_y_mm,tip_z_mm,tension_1_N,displacement_1_mm,tip_force_x_N,tip_force_y_N,tip_force_z_N,result"
     assert header == names and len(rows) == STEPS + 1
     table = np.array([[float(v) for v in row.split(",")] for row in rows])
     np.testing.assert_allclose(table[:, 0], np.asarray(api.t), atol=1e-15)
     np.testing.assert_allclose(table[-1, 1:4] * 1e-3, np.asarray(api.tip_position[-1]), rtol=0, atol=TIP_ATOL)
     np.testing.assert_allclose(table[:, 1:4] * 1e-3, np.asarray(api.tip_position), rtol=0, atol=TIP_ATOL)
-    assert table[-1, 4] == 20 and table[-1, 5] == pytest.approx(0.01) and not table[:, -1].any()
+    assert table[-1, 4] == 20 and table[-1, 6] == pytest.approx(0.01) and not table[:, -1].any()
+    np.testing.assert_allclose(table[:, 5] * 1e-3, np.asarray(api.displacements[:, 0]), rtol=0, atol=1e-15)
     assert abs(table[-1, 1]) > 0.1  # the tip force moved the tip sideways [mm]
 
     saved = np.load(out / "trajectory.npz")
-    for name in ("t", "s", "position", "rotation", "force", "moment", "velocity", "angular_velocity", "tensions"):
+    for name in (
+        "t",
+        "s",
+        "position",
+        "rotation",
+        "force",
+        "moment",
+        "velocity",
+        "angular_velocity",
+        "tensions",
+        "displacements",
+    ):
         np.testing.assert_array_equal(saved[name], np.asarray(getattr(api, name)), err_msg=name)
     meta = json.loads(str(saved["metadata"]))
     assert meta["units"]["position"] == "m" and meta["units"]["t"] == "s" and meta["dt_s"] == 1e-3
