@@ -33,8 +33,8 @@ and its continuity is K - 1 more residuals. Single shooting's sensitivity grows 
 k L = 1.06 sqrt(steps per first period) for a cantilever: the time step's inertia acts as an
 elastic foundation whose stiffness grows as 1 / dt^2, and K intervals divide k L by K. Chord
 steps, then Newton's method (a jacfwd Jacobian, one forward pass for all intervals at once;
-Levenberg-Marquardt where a step does not lower the residual) start from the last two steps
-extrapolated (``_step``), and the root passes ``lax.custom_root``: derivatives of any trajectory
+Levenberg-Marquardt where a step does not lower the residual) start from the last three roots
+extrapolated (``_extrapolate``, ``_step``), and the root passes ``lax.custom_root``: derivatives of any trajectory
 output with respect to every input go through each step's implicit solve.
 """
 
@@ -191,7 +191,7 @@ def _acceleration(c: Scheme, d: Dyn, q_h):
 
 CHORD_STEPS = 4
 """Most chord steps (the Jacobian of the extrapolated guess, a primal pass each) a time step tries
-before Newton's own: from a guess as close as the last steps' extrapolation, each squares the
+before Newton's own: from a guess as close as the last roots' extrapolation, each squares the
 error's ratio to the guess's (e_k ~ e_0^(k+1))."""
 
 N_START = 15
@@ -359,11 +359,22 @@ def _move(u: Unknowns, d) -> Unknowns:
     return Unknowns(u.x + d[:n_x], cayley(inner[:, :3]) @ u.R, u.z + inner[:, 3:])
 
 
-def _extrapolate(u: Unknowns, before: Unknowns) -> Unknowns:
-    """The next step's guess from the last two roots, linear in each unknown (rotations by their
-    relative rotation)."""
-    R = jax.vmap(orthonormalize)(u.R @ jnp.swapaxes(before.R, -1, -2) @ u.R)
-    return Unknowns(2 * u.x - before.x, R, 2 * u.z - before.z)
+def _extrapolate(u: Unknowns, before: Unknowns, earlier: Unknowns, order) -> Unknowns:
+    """The next step's guess from the last three roots, by a polynomial of ``order`` (0, 1 or 2,
+    traced) in time in each unknown; a rotation by its last relative rotation D1 = R R_before^T
+    (order 1: D1 R), and for order 2 turned on by that rotation's change, D1 D0^T D1 R with
+    D0 = R_before R_earlier^T."""
+    w = jnp.array([[1.0, 0.0, 0.0], [2.0, -1.0, 0.0], [3.0, -3.0, 1.0]])[order]
+
+    def mixed(a, b, c):
+        return w[0] * a + w[1] * b + w[2] * c
+
+    def T(R):
+        return jnp.swapaxes(R, -1, -2)
+
+    D1, D0 = u.R @ T(before.R), before.R @ T(earlier.R)
+    R = jnp.where(order == 2, D1 @ T(D0) @ D1 @ u.R, jnp.where(order == 1, D1 @ u.R, u.R))
+    return Unknowns(mixed(u.x, before.x, earlier.x), jax.vmap(orthonormalize)(R), mixed(u.z, before.z, earlier.z))
 
 
 def _at_rotations(v, R_ref) -> Unknowns:
@@ -695,11 +706,11 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
         return Problem(robot_, act_i, ld, gravity_, c_i, history, F_c, _scale(F_c, L, dt), K, solver.steps)
 
     def advance(carry, i):
-        (u, before), z1, z2, zt1 = carry
+        (u, before, earlier), z1, z2, zt1 = carry
         ci = jax.tree.map(lambda a: jnp.where(i == 0, 0.0, a), c)
         history = jax.tree.map(lambda a, b, d: ci.c1 * a + ci.c2 * b + ci.d1 * d, z1, z2, zt1)
         at = problem(i, ci, history)
-        guess = jax.tree.map(lambda e, a: jnp.where(i > 1, e, a), _extrapolate(u, before), u)
+        guess = _extrapolate(u, before, earlier, jnp.clip(i - 1, 0, 2))
         guess, previous = (v.scaled(at.F_c, at.S) for v in (guess, u))
         root, info, (ends, nodes, z) = _step(
             lambda lam, frozen=False: problem(i, ci, history, lam, frozen), guess, previous, solver
@@ -712,7 +723,7 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
         zt = jax.tree.map(lambda a, b: ci.c0 * a + b, z, history)
         slack = at.closing(at.layout(root.x), root.x, ends, _next_rotations(root))[2]
         out = (nodes, jnp.where(slack, 0.0, at.actuation(root.x).tensions), info)  # slack: 0, as in statics
-        return ((root.physical(at.F_c, at.S), u), z, jax.tree.map(lambda a, b: jnp.where(i == 0, a, b), z, z1), zt), out
+        return ((root.physical(at.F_c, at.S), u, before), z, jax.tree.map(lambda a, b: jnp.where(i == 0, a, b), z, z1), zt), out
 
     act0, load0 = inputs(0)
     rest = (jnp.zeros((n_nodes, 4, 12)), jnp.zeros(6))
@@ -722,7 +733,7 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
     y = _integrate(robot, load0, gravity, lay0._replace(plan=None), STATIC, rest[0], at_base)[1]
     inner = jax.tree.map(lambda a: a[n_nodes // K : n_nodes : n_nodes // K], y)
     u0 = Unknowns(base.at[3:6].divide(L), inner.y.R, jnp.concatenate([inner.y.N, inner.y.M, inner.q, inner.w], -1))
-    start = ((u0, u0), rest, rest, jax.tree.map(jnp.zeros_like, rest))
+    start = ((u0, u0, u0), rest, rest, jax.tree.map(jnp.zeros_like, rest))
     step = jax.checkpoint(advance) if checkpoint else advance
     _, (nodes, tensions, info) = lax.scan(step, start, jnp.arange(0 if static_start else 1, T.shape[0]))
     s = jnp.concatenate([lay0.s0, L[None]])
