@@ -280,10 +280,12 @@ class Problem(NamedTuple):
 
     def residual(self, u: Unknowns):
         """Continuity at every interior start ((K - 1) 15, flattened), then the tip's (6,) and
-        the driven tendons' (n_d,); and the run (ends, nodes, stage values)."""
+        the driven tendons' (n_d,); and the run (ends, nodes, stage values) with the tendon
+        tensions (a slack driven tendon's exactly 0, as in statics)."""
         lay = self.layout(u.x)
         out = self.run(lay, *self.starts(u))
-        return _stacked(u, *self.closing(lay, u.x, out[0], _next_rotations(u))[:2]), out
+        cont, tail, slack = self.closing(lay, u.x, out[0], _next_rotations(u))
+        return _stacked(u, cont, tail), (*out, jnp.where(slack, 0.0, self.actuation(u.x).tensions))
 
     def linearize(self, u: Unknowns):
         """The residual and its Jacobian in (x, each interior's rotation (I + w^) R, then z): one
@@ -307,8 +309,6 @@ class Problem(NamedTuple):
             return out, (*out, lay, run)
 
         (G, T, Gl), (cont, tail, l, lay, run) = jax.jacfwd(ends, has_aux=True)(jnp.zeros(m + n_d))
-        lengths = jnp.sum(l, 0)
-        dl = jax.jacfwd(lambda lengths: self.closing(lay, u.x, run, R_next, lengths)[1][6:])(lengths)
 
         def columns(k):  # interval k's start unknowns: the base wrench for the first
             return slice(0, 6) if k == 0 else slice(6 + n_d + N_START * (k - 1), 6 + n_d + N_START * k)
@@ -325,8 +325,10 @@ class Problem(NamedTuple):
             J = J.at[rows, tensions].set(G[k][:, m:])
         tip = n - 6 - n_d
         J = J.at[tip:, tensions].set(T[:, m:]).at[tip : tip + 6, columns(K - 1)].set(own(K - 1, T[:6]))
-        for k in range(K if n_d else 0):
-            J = J.at[tip + 6 :, columns(k)].set(dl @ own(k, Gl[k]))
+        if n_d:
+            dl = jax.jacfwd(lambda lengths: self.closing(lay, u.x, run, R_next, lengths)[1][6:])(jnp.sum(l, 0))
+            for k in range(K):
+                J = J.at[tip + 6 :, columns(k)].set(dl @ own(k, Gl[k]))
         return _stacked(u, cont, tail), J
 
 
@@ -424,7 +426,7 @@ def _step(problem_at, guess: Unknowns, previous: Unknowns, solver: SolverOptions
 
     Returns the root, the StepInfo (chord and Newton steps and the code of the search, the
     residual of the run at the root: the same to rounding) and that run (ends, nodes, stage
-    values)."""
+    values, tensions: ``Problem.residual``)."""
     guess, previous = lax.stop_gradient((guess, previous))
     full = problem_at(1.0, frozen=True)
     r, J = full.linearize(guess)
@@ -712,7 +714,7 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
         at = problem(i, ci, history)
         guess = _extrapolate(u, before, earlier, jnp.clip(i - 1, 0, 2))
         guess, previous = (v.scaled(at.F_c, at.S) for v in (guess, u))
-        root, info, (ends, nodes, z) = _step(
+        root, info, (ends, nodes, z, tensions) = _step(
             lambda lam, frozen=False: problem(i, ci, history, lam, frozen), guess, previous, solver
         )
         offsets = jnp.cumsum(ends.y.p, 0) - ends.y.p  # each interval ran from p = 0 and l = 0
@@ -721,9 +723,8 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
         nodes = jax.tree.map(lambda a: jnp.concatenate([a[:, :-1].reshape(-1, *a.shape[2:]), a[-1, -1:]]), nodes)
         z = (z.reshape(n_nodes, 4, 12), jnp.concatenate([ends.q[-1], ends.w[-1]]))
         zt = jax.tree.map(lambda a, b: ci.c0 * a + b, z, history)
-        slack = at.closing(at.layout(root.x), root.x, ends, _next_rotations(root))[2]
-        out = (nodes, jnp.where(slack, 0.0, at.actuation(root.x).tensions), info)  # slack: 0, as in statics
-        return ((root.physical(at.F_c, at.S), u, before), z, jax.tree.map(lambda a, b: jnp.where(i == 0, a, b), z, z1), zt), out
+        older = jax.tree.map(lambda a, b: jnp.where(i == 0, a, b), z, z1)  # the next step's z(t - 2 dt)
+        return ((root.physical(at.F_c, at.S), u, before), z, older, zt), (nodes, tensions, info)
 
     act0, load0 = inputs(0)
     rest = (jnp.zeros((n_nodes, 4, 12)), jnp.zeros(6))

@@ -97,7 +97,8 @@ def damped(linearize, step, x0, tol, max_iter, shapes=None, natural=False):
         r_try, J_try = linearize(x_try)
         lower = jnp.sum(r_try**2) < jnp.sum(r**2)
         if natural:
-            level = jnp.sum(jnp.linalg.solve(J, r_try) ** 2) < jnp.sum(jnp.linalg.solve(J, r) ** 2)
+            d = jnp.linalg.solve(J, jnp.stack([r_try, r], -1))  # one factorisation for both
+            level = jnp.sum(d[:, 0] ** 2) < jnp.sum(d[:, 1] ** 2)
             lower = jnp.where((it > 0) & (mu <= MU_START), level, lower)
         ok = jnp.all(jnp.isfinite(r_try)) & lower
         x, r, J = jax.tree.map(lambda new, old: jnp.where(ok, new, old), (x_try, r_try, J_try), (x, r, J))
