@@ -418,7 +418,8 @@ def _parser() -> argparse.ArgumentParser:
         epilog="The input table: a CSV with the time column t_s (seconds, from 0, increasing), one column per tendon, "
         "tension_1_N, tension_2_N, ... (newtons, tendons numbered from 1) or for a displacement-driven tendon "
         "displacement_1_mm, ... (the length pulled at the base), and optionally tip_force_x_N, tip_force_y_N, "
-        "tip_force_z_N (world frame, a missing one 0); linear between its rows, the last row held after its time "
+        "tip_force_z_N (world frame, a missing one 0) and insertion_1_mm, ... (every tube's depth, for tubes that "
+        "move; else --insertion-mm); linear between its rows, the last row held after its time "
         "(docs/cli.md). --max-iter limits the Newton steps of each time step.",
     )
     m.add_argument("--inputs", required=True, metavar="inputs.csv", help="the input table (CSV, format below)")
@@ -453,7 +454,7 @@ def _parser() -> argparse.ArgumentParser:
         help=f"shooting intervals of each time step (default: the most up to {INTERVALS} that divide the robot's RK4 "
         "steps); more where small steps or sudden inputs make a step fail",
     )
-    _depth_flags(m, ", held in time")
+    _depth_flags(m, ", held in time (tubes that move: the input table's insertion_i_mm columns)")
     m.add_argument(
         "--out",
         metavar="DIR",
@@ -1018,55 +1019,61 @@ def _sweep_command(args) -> int:
 class InputTable(NamedTuple):
     """``tdct simulate``'s input table in SI units: its times [s] (k,), from 0 and increasing, the
     tendon tensions [N] (k, n_t) (0 for a displacement-driven tendon), the displacement-driven
-    tendons' displacements [m] (k, n_d), those tendons (indices from 0) and the world-frame tip
-    force [N] (k, 3) of each row."""
+    tendons' displacements [m] (k, n_d), those tendons (indices from 0), the world-frame tip
+    force [N] (k, 3) and the tube depths [m] (k, n_tubes) of each row (None: not in the table)."""
 
     t: np.ndarray
     tensions: np.ndarray
     displacements: np.ndarray
     driven: tuple
     tip_force: np.ndarray
+    insertions: np.ndarray | None = None
 
-    def at(self, times) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(tensions, displacements, tip force) at ``times`` [s], linear between rows, the last row
-        held after it."""
+    def at(self, times) -> tuple[np.ndarray, ...]:
+        """(tensions, displacements, tip force, tube depths or None) at ``times`` [s], linear
+        between rows, the last row held after it."""
 
         def columns(x):
             return np.array([np.interp(times, self.t, c) for c in x.T]).T.reshape(len(times), x.shape[1])
 
-        return columns(self.tensions), columns(self.displacements), columns(self.tip_force)
+        depths = None if self.insertions is None else columns(self.insertions)
+        return columns(self.tensions), columns(self.displacements), columns(self.tip_force), depths
 
 
-def read_input_table(path, n_tendons: int) -> InputTable:
+def read_input_table(path, n_tendons: int, n_tubes: int = 0) -> InputTable:
     """Reads ``tdct simulate``'s input table (docs/cli.md): a CSV whose first line names its columns,
     ``t_s``, for each tendon i either ``tension_{i}_N`` or ``displacement_{i}_mm`` (the length
-    pulled at the base), and optionally ``tip_force_{x,y,z}_N`` (a missing one 0); blank lines
-    and lines starting with '#' are skipped.
+    pulled at the base), optionally ``tip_force_{x,y,z}_N`` (a missing one 0) and, for tubes that
+    move, ``insertion_{i}_mm`` for every tube i; blank lines and lines starting with '#' are
+    skipped.
 
     Raises:
         ValueError: ``path:line: ...`` naming the column, the value and what is allowed: what
             ``recording._table`` refuses (an unreadable file, rows of another field count, no
             rows), a missing time column, a first time other than 0, times that do not
             increase, unknown or missing columns (one tension or displacement column per
-            tendon, not both), a value that is not a finite number, a negative tension.
+            tendon, not both; an insertion column for every tube or none), a value that is not a
+            finite number, a negative tension, a depth outside [0, L] (``simulate`` checks it).
     """
     path = Path(path)
     table = _table(path, "input table")
     header, names, rows = table.line, table.names, table.rows
     tensions = [f"tension_{i}_N" for i in range(1, n_tendons + 1)]
     pulls = [f"displacement_{i}_mm" for i in range(1, n_tendons + 1)]
+    depths = [f"insertion_{i}_mm" for i in range(1, n_tubes + 1)]
     robot = f"the robot has {n_tendons} tendon{'s' * (n_tendons != 1)}"
-    allowed = [TIME_COLUMN, *tensions, *pulls, *TIP_FORCE_COLUMNS]
+    allowed = [TIME_COLUMN, *tensions, *pulls, *TIP_FORCE_COLUMNS, *depths]
     said = ", ".join(
         [TIME_COLUMN, *tensions[:1], *(["...", tensions[-1]] if n_tendons > 2 else tensions[1:]), *TIP_FORCE_COLUMNS]
     )
     for name in names:
         if name in allowed:
             continue
-        numbered = re.fullmatch(r"(tension|displacement)_(\d+)_(N|mm)", name)
+        numbered = re.fullmatch(r"(tension|displacement|insertion)_(\d+)_(N|mm)", name)
         if numbered:
-            kind = f"{numbered[1]} columns are {', '.join(tensions if numbered[1] == 'tension' else pulls) or 'none'}"
-            raise _error(path, header, f"column {name!r}: {robot}, so the {kind}")
+            which = {"tension": tensions, "displacement": pulls, "insertion": depths}[numbered[1]]
+            has = robot if numbered[1] != "insertion" else f"the robot has {n_tubes} tube{'s' * (n_tubes != 1)}"
+            raise _error(path, header, f"column {name!r}: {has}, so the {numbered[1]} columns are {', '.join(which) or 'none'}")
         close = [TIME_COLUMN] if re.fullmatch(r"t(ime)?(_\w*)?", name, re.I) else difflib.get_close_matches(name, allowed, n=1)
         guess = f" (did you mean {close[0]!r}?)" if close else ""
         hint = "; separate the columns by commas" if ";" in name or "\t" in name else ""
@@ -1089,6 +1096,9 @@ def read_input_table(path, n_tendons: int) -> InputTable:
             f"no column(s) {', '.join(missing)}: {robot}, one tension column each ({tensions[0]} to {tensions[-1]}, in N) "
             "or, for a displacement-driven tendon, displacement_i_mm",
         )
+    given = [c for c in depths if c in names]
+    if given and len(given) < n_tubes:
+        raise _error(path, header, f"columns {', '.join(given)}: give every tube's depth ({', '.join(depths)}, in mm) or none")
     index = {name: names.index(name) for name in names}
     values = {name: np.array([_number(path, line, name, f[index[name]]) for line, f in rows]) for name in names}
     lines = [line for line, _ in rows]
@@ -1114,6 +1124,7 @@ def read_input_table(path, n_tendons: int) -> InputTable:
         1e-3 * np.array([values[pulls[i]] for i in driven]).T.reshape(len(rows), len(driven)),
         driven,
         np.stack([values.get(c, zeros) for c in TIP_FORCE_COLUMNS], axis=-1),
+        1e-3 * np.stack([values[c] for c in depths], axis=-1) if given else None,
     )
 
 
@@ -1139,7 +1150,10 @@ def _simulate_command(args) -> int:
         check_dynamics(robot, Actuation.of(None, robot), Loads(), solver)
     except ValueError as e:
         raise ValueError(f"--robot {args.robot}: {e}" if args.robot else str(e)) from None
-    table = read_input_table(args.inputs, robot.n_tendons)
+    table = read_input_table(args.inputs, robot.n_tendons, robot.n_tubes)
+    if table.insertions is not None and (args.insertion_mm is not None or args.insertions_mm is not None):
+        flag = "--insertion-mm" if args.insertion_mm is not None else "--insertions-mm"
+        raise ValueError(f"{flag} and the input table's insertion columns: give the tube depths in one of them")
     dt = args.dt_ms * 1e-3
     duration = float(table.t[-1]) if args.duration_s is None else args.duration_s
     if duration == 0:
@@ -1156,7 +1170,7 @@ def _simulate_command(args) -> int:
     if duration > table.t[-1]:
         print(f"tdct: note: the table ends at {table.t[-1]:g} s; its last row is held to {duration:g} s", file=sys.stderr)
     times = np.arange(steps + 1) * dt
-    tensions, displacements, tip_force = table.at(times)
+    tensions, displacements, tip_force, insertions = table.at(times)
     if not args.quiet:
         print(
             f"simulating {steps} steps of {args.dt_ms:g} ms to t = {times[-1]:g} s in one compiled program "
@@ -1172,7 +1186,7 @@ def _simulate_command(args) -> int:
         displacements=displacements,
         driven=table.driven,
         tip_force=tip_force,
-        insertions=[d * 1e-3 for d in depths],
+        insertions=[d * 1e-3 for d in depths] if insertions is None else insertions,
         start=args.start,
         alpha=args.alpha,
         gravity=_gravity(args),
@@ -1241,20 +1255,24 @@ def _step_failure(traj, i: int, solver: SolverOptions, args) -> str:
 
 def _write_trajectory(out: Path, traj, tip_force, args, dt: float) -> list[Path]:
     """trajectory.csv (t_s, tip in mm, the tensions (found for displacement-driven tendons), every
-    tendon's displacement in mm, the tip force, each step's result code) and trajectory.npz
+    tendon's displacement in mm, the tip force, every tube's depth in mm, each step's result code) and trajectory.npz
     (every Trajectory array and the tip force [N], SI units, and a JSON ``metadata`` entry with the
     units and the run's settings) in the folder ``out``; returns their paths."""
     out.mkdir(parents=True, exist_ok=True)
     n_t = traj.tensions.shape[1]
     names = [TIME_COLUMN, "tip_x_mm", "tip_y_mm", "tip_z_mm", *(f"tension_{i}_N" for i in range(1, n_t + 1))]
-    names += [*(f"displacement_{i}_mm" for i in range(1, n_t + 1)), *TIP_FORCE_COLUMNS, "result"]
-    table = np.column_stack([traj.t, 1e3 * traj.tip_position, traj.tensions, 1e3 * traj.displacements, tip_force])
+    names += [*(f"displacement_{i}_mm" for i in range(1, n_t + 1)), *TIP_FORCE_COLUMNS]
+    names += [*(f"insertion_{i}_mm" for i in range(1, traj.insertions.shape[1] + 1)), "result"]
+    table = np.column_stack(
+        [traj.t, 1e3 * traj.tip_position, traj.tensions, 1e3 * traj.displacements, tip_force, 1e3 * traj.insertions]
+    )
     rows = [",".join([*(f"{v:.12g}" for v in row), str(int(code))]) for row, code in zip(table, traj.result, strict=True)]
     csv_path, npz_path = out / "trajectory.csv", out / "trajectory.npz"
     csv_path.write_text("\n".join([",".join(names), *rows]) + "\n")
     units = dict(
         t="s", s="m", position="m", rotation="1 (world from body)", force="N", moment="N m", velocity="m/s",
-        angular_velocity="rad/s", tensions="N", displacements="m", tip_force="N", iterations="chord and Newton steps",
+        angular_velocity="rad/s", tensions="N", displacements="m", insertions="m", tip_force="N",
+        iterations="chord and Newton steps",
         result="tdct_jax.status code, 0 converged", residual_norm="1 (scaled tip residual, max norm)",
     )  # fmt: skip
     metadata = dict(

@@ -40,6 +40,7 @@ output with respect to every input go through each step's implicit solve.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import jax
@@ -116,6 +117,14 @@ class Layout(NamedTuple):
     plan: rod.Plan | None
 
 
+def _points(b, steps: int, offsets=(0.0,)):
+    """Arc lengths [m] of ``steps`` RK4 steps per interval between breakpoints b (P + 1,), each
+    step's points at ``offsets`` of its length: (P, steps, len(offsets))."""
+    h = (b[1:] - b[:-1]) / steps
+    at = np.arange(steps)[:, None] + np.asarray(offsets)[None, :]
+    return b[:-1, None, None] + h[:, None, None] * at[None]
+
+
 def layout(robot: Robot, act: Actuation, load: Loads, gravity, steps: int) -> Layout:
     """``rod.plan``'s intervals as ``steps`` RK4 steps each."""
     pl = rod.plan(robot, act, load, gravity)
@@ -128,7 +137,7 @@ def layout(robot: Robot, act: Actuation, load: Loads, gravity, steps: int) -> La
 
     return Layout(
         jax.tree.map(lambda a: jnp.repeat(a, steps, axis=0), pl.intervals),
-        (pl.b[:-1, None] + h[:, None] * np.arange(steps)[None]).reshape(-1),
+        _points(pl.b, steps).reshape(-1),
         jnp.repeat(h, steps),
         jump(pl.dN),
         jump(pl.dM),
@@ -187,6 +196,37 @@ def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stage
 def _acceleration(c: Scheme, d: Dyn, q_h):
     """p_tt = R (q_t + w x q) at the state d, q_t = c0 q + q_h."""
     return d.y.R @ (c.c0 * d.q + q_h + jnp.cross(d.w, d.q))
+
+
+STAGES = (0.0, 0.5, 0.5, 1.0)
+"""Where in its RK4 step each stage's vector field is evaluated, as a fraction of the step."""
+
+
+def remap(z, b_old, b_new, steps: int):
+    """Stage-point values z (P steps, 4, ...) of the integration plan with breakpoints b_old
+    (P + 1,), at the stage points of the plan with breakpoints b_new (a tube's end moved): each
+    material point's own value. Each stage's values are interpolated along s through the four
+    nearest points of the same stage in the old breakpoint interval that holds the new point
+    (cubic Lagrange; strains jump at breakpoints, so no interval borrows from its neighbour); a
+    new point at a breakpoint belongs to its own interval's side."""
+    P = b_old.size - 1
+    offsets = jnp.asarray(STAGES)[None, None, :]
+    s = _points(b_new, steps, STAGES)
+    middle = ((b_new[:-1] + b_new[1:]) / 2)[:, None, None]
+    k = jnp.clip(jnp.searchsorted(b_old, s + 1e-9 * (middle - s), side="right") - 1, 0, P - 1)
+    h = (b_old[k + 1] - b_old[k]) / steps
+    t = jnp.where(h > 0, (s - b_old[k]) / jnp.where(h > 0, h, 1.0), 0.0) - offsets
+    n = min(4, steps)
+    first = jnp.clip(jnp.floor(t).astype(int) - (n - 1) // 2, 0, steps - n)
+    x = t - first
+
+    def basis(j):
+        return math.prod(((x - m) / (j - m) for m in range(n) if m != j), start=jnp.ones_like(x))
+
+    weights = jnp.stack([basis(j) for j in range(n)], -1)
+    stage = jnp.broadcast_to(jnp.arange(4)[None, None, :, None], (*t.shape, n))
+    picked = z.reshape(P, steps, 4, -1)[k[..., None], first[..., None] + jnp.arange(n)[None, None, None, :], stage]
+    return jnp.einsum("...n,...nc->...c", weights, picked).reshape(z.shape)
 
 
 CHORD_STEPS = 4
@@ -490,7 +530,8 @@ class Trajectory:
 
     Attributes:
         t: times [s], (n,), the first the start.
-        s: arc length of each node [m], (n, m): ``steps`` nodes per breakpoint interval, and the tip.
+        s: arc length of each node [m], (n, m): ``steps`` nodes per breakpoint interval, and the
+            tip (the nodes move where a tube's end does).
         position: p(s, t) [m], (n, m, 3). rotation: R(s, t), (n, m, 3, 3).
         force, moment: the total internal force N [N] and moment M [N m] of rod plus tendons
             (at s = 0 the load on the base), (n, m, 3).
@@ -499,6 +540,7 @@ class Trajectory:
             displacement-driven tendons (slack: 0).
         displacements: what each tendon's encoder reads [m], (n, n_t): its rest length inside
             the straight robot less its present one (``rod.displacements``).
+        insertions: each tube's depth [m], (n, n_tubes).
         iterations: chord and Newton steps of each time step (n,) (``_step``), 0 at the start.
         result: each time step's status code (n,) (``tdct_jax.status``), SUCCESS (0) when its
             scaled residual reached ``solver.tol``.
@@ -515,6 +557,7 @@ class Trajectory:
     angular_velocity: jax.Array
     tensions: jax.Array
     displacements: jax.Array
+    insertions: jax.Array
     iterations: jax.Array
     result: jax.Array
     residual_norm: jax.Array
@@ -532,7 +575,7 @@ class Trajectory:
 
 def _inputs(robot: Robot, load: Loads, driven: tuple, given: dict, n: int | None):
     """The per-time inputs (tensions, the driven tendons' displacements, tip force and moment,
-    the point loads' forces and moments) as arrays with a leading time axis of n rows (constants
+    the point loads' forces and moments, the tube depths) as arrays with a leading time axis of n rows (constants
     broadcast along time), and n; a point load's None is ``load``'s own."""
     k = np.size(load.point_s)
     shapes = {
@@ -542,6 +585,7 @@ def _inputs(robot: Robot, load: Loads, driven: tuple, given: dict, n: int | None
         "tip_moment": ((3,), " N m", None),
         "point_force": ((k, 3), " N", load.point_force),
         "point_moment": ((k, 3), " N m", load.point_moment),
+        "insertions": ((robot.n_tubes,), " m", None),
     }
     rows = {}
     for name, (shape, unit, own) in shapes.items():
@@ -615,7 +659,10 @@ def simulate(
         point_force, point_moment: world-frame forces [N] and moments [N m] of ``load``'s k point
             loads (at ``load.point_s``, fixed), (k, 3) or (steps + 1, k, 3): e.g. held at the start
             and then removed; None: ``load``'s own, constant.
-        insertions: tube depths [m], constant in time.
+        insertions: tube depths [m], (n_tubes,) for all times or (steps + 1, n_tubes): a tube
+            pushed in or drawn back along time (its end a moving breakpoint: the history is
+            carried to the new stage points in the material coordinate, ``remap``; the tube's own
+            axial inertia is neglected, docs/dynamics.md).
         load: distributed force and point loads (``Loads``; its tip load is replaced by
             ``tip_force`` and ``tip_moment``, its point loads' values by ``point_force`` and
             ``point_moment`` where given).
@@ -649,12 +696,16 @@ def simulate(
         check_range("steps", steps, 1)
     driven = tuple(int(i) for i in driven)
     given = {"tensions": tensions, "displacements": displacements, "tip_force": tip_force, "tip_moment": tip_moment}
-    given |= {"point_force": point_force, "point_moment": point_moment}
+    given |= {"point_force": point_force, "point_moment": point_moment, "insertions": insertions}
     rows, n = _inputs(robot, load, driven, given, None if steps is None else steps + 1)
-    T, D, F, C, PF, PM = rows
-    depths = jnp.zeros(robot.n_tubes) if insertions is None else insertions
-    act = Actuation(T[0], depths, D[0], driven)
-    check(robot, Actuation(T[0], depths, jnp.max(D, 0), driven), load, solver)
+    T, D, F, C, PF, PM, I = rows
+    moving = np.ndim(insertions) == 2
+    act = Actuation(T[0], I[0], D[0], driven)
+    check(robot, Actuation(T[0], I[0], jnp.max(D, 0), driven), load, solver)
+    if moving and is_concrete(robot.length) and is_concrete(I):
+        L = float(robot.length)
+        for i in np.flatnonzero(np.any((np.asarray(I) < 0) | (np.asarray(I) > L), axis=1))[:1]:
+            check_range(f"insertions[{i}] (t = {i * float(dt):g} s)", I[i], 0.0, L, unit=f" m (0 to the robot length {L:g} m)")
     g = gravity_vector(gravity)
     base = jnp.concatenate(
         [F[0], C[0] + jnp.cross(robot.length * E3, F[0]), T[0, np.asarray(driven, int)]]
@@ -663,7 +714,7 @@ def simulate(
         held = load._with(point_force=PF[0], point_moment=PM[0]).with_tip(F[0], C[0])
         found = solve(robot, act, held, gravity=g, solver=solver, throw=throw)
         base = jnp.concatenate([found.base_wrench, found.tensions[np.asarray(driven, int)]])
-    out = _simulate(robot, act, load, rows, dt, alpha, g, base, solver, start == "static", checkpoint)
+    out = _simulate(robot, act, load, rows, dt, alpha, g, base, solver, start == "static", moving, checkpoint)
     if throw and is_concrete(out.result):
         failed = np.flatnonzero(np.asarray(out.result) != status.SUCCESS)
         if failed.size:
@@ -679,11 +730,12 @@ def simulate(
     return out
 
 
-@jax.jit(static_argnames=("solver", "static_start", "checkpoint"))
-def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_start, checkpoint):
+@jax.jit(static_argnames=("solver", "static_start", "moving", "checkpoint"))
+def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_start, moving, checkpoint):
     """``simulate``'s compiled part: one scan over the time rows, each an implicit step (the first,
     with ``static_start``, the static root: every coefficient zero), so that the root and the
-    sweep are compiled once; ``act``: the insertions and the driven tendons; ``base``: the base
+    sweep are compiled once; ``act``: the driven tendons; with ``moving`` (tube depths that change
+    in time) each step's history is first carried to its own stage points (``remap``); ``base``: the base
     wrench (N(0), M(0)) and driven tensions the first Newton starts from, the interior starts
     (multiple shooting) from one static pass from it. The roots pass from step to step in
     physical units (``Unknowns.physical``)."""
@@ -696,35 +748,44 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
     def inputs(i, lam=1.0):
         """Row i's inputs, or with lam < 1 those of row i - 1 moved lam of the way to row i."""
         j = jnp.maximum(i - 1, 0)
-        T_i, D_i, F_i, C_i, PF_i, PM_i = (a[j] + lam * (a[i] - a[j]) for a in rows)
+        T_i, D_i, F_i, C_i, PF_i, PM_i, I_i = (a[j] + lam * (a[i] - a[j]) for a in rows)
         ld = load._with(point_force=PF_i, point_moment=PM_i).with_tip(F_i, C_i)
-        return Actuation._rebuild(T_i, act.insertions, D_i, act.driven), ld
+        return Actuation._rebuild(T_i, I_i, D_i, act.driven), ld
 
-    def problem(i, c_i, history, lam=1.0, frozen=False):
+    def breakpoints(robot, act_i, ld):
+        return rod.plan(robot, act_i, ld, gravity).b
+
+    def problem(i, c_i, history, b_old, lam=1.0, frozen=False):
+        """Row i's Problem; ``history`` at the stage points of breakpoints ``b_old`` (the last step's)."""
         act_i, ld = inputs(i, lam)
-        parts = (robot, act_i, ld, gravity, c_i, history)
-        robot_, act_i, ld, gravity_, c_i, history = lax.stop_gradient(parts) if frozen else parts
+        parts = (robot, act_i, ld, gravity, c_i, history, b_old)
+        robot_, act_i, ld, gravity_, c_i, history, b_old = lax.stop_gradient(parts) if frozen else parts
+        if moving:
+            history = (remap(history[0], b_old, breakpoints(robot_, act_i, ld), solver.steps), history[1])
         F_c = rod.force_scale(robot_, act_i, ld, gravity_)
         return Problem(robot_, act_i, ld, gravity_, c_i, history, F_c, _scale(F_c, L, dt), K, solver.steps)
 
     def advance(carry, i):
-        (u, before, earlier), z1, z2, zt1 = carry
+        (u, before, earlier), z1, z2, zt1, b_old = carry
         ci = jax.tree.map(lambda a: jnp.where(i == 0, 0.0, a), c)
         history = jax.tree.map(lambda a, b, d: ci.c1 * a + ci.c2 * b + ci.d1 * d, z1, z2, zt1)
-        at = problem(i, ci, history)
+        at = problem(i, ci, history, b_old)
+        b = breakpoints(robot, *inputs(i))
         guess = _extrapolate(u, before, earlier, jnp.clip(i - 1, 0, 2))
         guess, previous = (v.scaled(at.F_c, at.S) for v in (guess, u))
         root, info, (ends, nodes, z, tensions) = _step(
-            lambda lam, frozen=False: problem(i, ci, history, lam, frozen), guess, previous, solver
+            lambda lam, frozen=False: problem(i, ci, history, b_old, lam, frozen), guess, previous, solver
         )
         offsets = jnp.cumsum(ends.y.p, 0) - ends.y.p  # each interval ran from p = 0 and l = 0
         lengths = jnp.cumsum(ends.l, 0) - ends.l
         nodes = nodes._replace(y=nodes.y._replace(p=nodes.y.p + offsets[:, None]), l=nodes.l + lengths[:, None])
         nodes = jax.tree.map(lambda a: jnp.concatenate([a[:, :-1].reshape(-1, *a.shape[2:]), a[-1, -1:]]), nodes)
         z = (z.reshape(n_nodes, 4, 12), jnp.concatenate([ends.q[-1], ends.w[-1]]))
-        zt = jax.tree.map(lambda a, b: ci.c0 * a + b, z, history)
+        zt = jax.tree.map(lambda a, b: ci.c0 * a + b, z, at.history)
+        if moving:
+            z1 = (remap(z1[0], b_old, b, solver.steps), z1[1])
         older = jax.tree.map(lambda a, b: jnp.where(i == 0, a, b), z, z1)  # the next step's z(t - 2 dt)
-        return ((root.physical(at.F_c, at.S), u, before), z, older, zt), (nodes, tensions, info)
+        return ((root.physical(at.F_c, at.S), u, before), z, older, zt, b), (nodes, tensions, info, b)
 
     act0, load0 = inputs(0)
     rest = (jnp.zeros((n_nodes, 4, 12)), jnp.zeros(6))
@@ -734,16 +795,18 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
     y = _integrate(robot, load0, gravity, lay0._replace(plan=None), STATIC, rest[0], at_base)[1]
     inner = jax.tree.map(lambda a: a[n_nodes // K : n_nodes : n_nodes // K], y)
     u0 = Unknowns(base.at[3:6].divide(L), inner.y.R, jnp.concatenate([inner.y.N, inner.y.M, inner.q, inner.w], -1))
-    start = ((u0, u0, u0), rest, rest, jax.tree.map(jnp.zeros_like, rest))
+    start = ((u0, u0, u0), rest, rest, jax.tree.map(jnp.zeros_like, rest), lay0.plan.b)
     step = jax.checkpoint(advance) if checkpoint else advance
-    _, (nodes, tensions, info) = lax.scan(step, start, jnp.arange(0 if static_start else 1, T.shape[0]))
-    s = jnp.concatenate([lay0.s0, L[None]])
+    _, (nodes, tensions, info, b) = lax.scan(step, start, jnp.arange(0 if static_start else 1, T.shape[0]))
+    s = jax.vmap(lambda b: jnp.concatenate([_points(b, solver.steps).reshape(-1), b[-1:]]))(b)
     displacements = jax.vmap(lambda l: rod.displacements(robot, l))(nodes.l[:, -1])
     if not static_start:  # the straight, unstrained robot at rest
-        n = s.size
+        s0 = jnp.concatenate([lay0.s0, L[None]])
+        n = s0.size
         zeros = jnp.zeros((n, 3))
-        straight = Dyn(State(s[:, None] * E3, jnp.broadcast_to(jnp.eye(3), (n, 3, 3)), zeros, zeros), zeros, zeros, None)
+        straight = Dyn(State(s0[:, None] * E3[None], jnp.broadcast_to(jnp.eye(3), (n, 3, 3)), zeros, zeros), zeros, zeros, None)
         nodes = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), straight, nodes._replace(l=None))
+        s = jnp.concatenate([s0[None], s])
         tensions = jnp.concatenate([T[:1], tensions])
         displacements = jnp.concatenate([jnp.zeros((1, robot.n_tendons)), displacements])
         first = StepInfo(jnp.int32(0), jnp.int32(status.SUCCESS), jnp.zeros(()))
@@ -751,7 +814,7 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
     y = nodes.y
     return Trajectory(
         jnp.arange(T.shape[0]) * dt,
-        jnp.broadcast_to(s, (T.shape[0], s.size)),
+        s,
         y.p,
         y.R,
         y.N,
@@ -760,6 +823,7 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
         jnp.einsum("...ij,...j->...i", y.R, nodes.w),
         tensions,
         displacements,
+        rows[6],
         info.iterations,
         info.result,
         info.residual_norm,

@@ -207,6 +207,61 @@ def test_global_momentum_balance():
     assert late[50] / late[100] > 3.0
 
 
+def tubed(tube_E, tube_density, damping=0.0):
+    """The rod as a tube (1 mm bore) with a tube of its own inside, pushed along it in time."""
+    section = tdct.Section(end=L, outer_diameter=D, inner_diameter=1e-3, E=E, nu=0.3, density=RHO, damping=damping)
+    tube = tdct.Tube(outer_diameter=0.8e-3, inner_diameter=0.6e-3, E=tube_E, nu=0.3, density=tube_density)
+    return tdct.Robot(L, (section,), (tdct.Tendon(offset=0.8e-3, angle=np.pi / 2),), tubes=(tube,))
+
+
+PUSHED = np.linspace(0.05, 0.25, 61)[:, None]
+"""A tube pushed from 50 to 250 mm deep over 60 steps (one compiled simulation for both tests)."""
+
+
+def test_a_tube_that_changes_nothing_changes_nothing_when_it_moves():
+    """A tube of no mass and a millionth of the rod's stiffness, pushed 0.2 m along the rod at
+    2.6 m/s while it falls from straight under gravity, leaves the motion as it is with the tube
+    held: the history follows the material points across the moving breakpoint (``remap``). The
+    difference left, 8e-8 m, is the tube's unshearable region (1.2e-7 m between the tube held at
+    its two depths); carrying the history by stage index instead gives 7e-5 m."""
+    phantom = tubed(1e7, 0.0)
+    dt = T1 / 50
+
+    def run(depths):
+        return simulate(phantom, dt, tensions=[0.0], insertions=depths, start="straight", solver=SOLVER)
+
+    moved, held = run(PUSHED), run(np.full_like(PUSHED, PUSHED[0]))
+    assert bool(moved.converged)
+    assert np.abs(np.asarray(held.tip_position[:, 1])).max() > 2e-3  # it falls 2.5 mm and swings
+    np.testing.assert_allclose(moved.tip_position, held.tip_position, rtol=0, atol=3e-7)
+    np.testing.assert_allclose(moved.s[-1, 20], PUSHED[-1, 0])  # the nodes moved with the tube's end
+    np.testing.assert_allclose(moved.insertions, PUSHED)
+
+
+def test_a_tube_pushed_in_during_a_damped_pull_settles_onto_solve_at_its_last_depth():
+    """A stiff tube (Nitinol) pushed in over the first 20 of 60 long steps, then held, the tendon
+    pulled: the critically damped rod settles onto ``solve``'s equilibrium at the last depth."""
+    stiff = tubed(75e9, 6450.0, damping=2 / OMEGA[0])
+    depths = np.minimum(PUSHED, PUSHED[20])
+    traj = simulate(stiff, 0.01, tensions=[1.0], insertions=depths, start="straight", solver=SOLVER)
+    static = tdct.solve(stiff, tdct.Actuation([1.0], depths[-1]), solver=SOLVER)
+    np.testing.assert_allclose(traj.tip_position[-1], static.tip_position, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("depths", "words"),
+    [
+        (np.linspace(0.1, 0.4, 5)[:, None], "insertions[3] (t = 0.003 s) = [0.325] is outside the allowed range [0, 0.3] m"),
+        (np.zeros((5, 2)), "insertions has shape (5, 2): (1,) or (times, 1) expected"),
+        (np.zeros((6, 1)), "insertions has 6 rows: one per time, 5"),
+    ],
+)
+def test_bad_insertions_along_time_are_refused_by_name(depths, words):
+    with pytest.raises(ValueError) as e:
+        simulate(tubed(75e9, 6450.0), 1e-3, 4, tensions=[0.0], insertions=depths)
+    assert words in str(e.value)
+
+
 @pytest.mark.slow
 def test_derivatives_of_a_trajectory_loss_match_central_differences():
     """jax.grad of a loss over the whole trajectory, through every step's implicit solve, in E,

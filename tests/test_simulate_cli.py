@@ -78,6 +78,10 @@ BAD_TABLES = [
     ("t_s,tension_1_N,tension_2_N\n0,0,0\n", "inputs.csv:1: column 'tension_2_N': the robot has 1 tendon, so the tension"),
     ("t_s,displacement_2_mm\n0,0\n", "column 'displacement_2_mm': the robot has 1 tendon, so the displacement columns are"),
     (
+        "t_s,tension_1_N,insertion_1_mm\n0,0,0\n",
+        "column 'insertion_1_mm': the robot has 0 tubes, so the insertion columns are none",
+    ),
+    (
         "t_s,tension_1_N,displacement_1_mm\n0,0,0\n",
         "inputs.csv:1: columns tension_1_N and displacement_1_mm: drive tendon 1 by its tension or its displacement",
     ),
@@ -151,10 +155,32 @@ def test_displacement_columns_drive_their_tendons_in_metres(tmp_path):
     path.write_text("t_s,displacement_1_mm,tension_2_N,tension_3_N\n0,0,0,0\n0.1,2,0,1.5\n")
     table = cli.read_input_table(path, 3)
     assert table.driven == (0,)
-    tensions, displacements, force = table.at(np.array([0.0, 0.05, 0.2]))
+    tensions, displacements, force, depths = table.at(np.array([0.0, 0.05, 0.2]))
+    assert depths is None
     np.testing.assert_allclose(displacements[:, 0], [0.0, 1e-3, 2e-3], rtol=1e-12)
     np.testing.assert_allclose(tensions, [[0, 0, 0], [0, 0, 0.75], [0, 0, 1.5]], rtol=1e-12)
     assert not force.any()
+
+
+def test_insertion_columns_move_every_tube_in_metres(tmp_path, capsys, nothing_simulated):
+    """insertion_i_mm columns give every tube's depth along time, in metres, interpolated like the
+    tensions; one tube's column without the other's, or the columns beside --insertion-mm, is
+    refused."""
+    path = tmp_path / "tubes.csv"
+    path.write_text("t_s,tension_1_N,insertion_1_mm,insertion_2_mm\n0,0,10,0\n0.1,1,30,5\n")
+    table = cli.read_input_table(path, 1, 2)
+    np.testing.assert_allclose(table.insertions, [[0.01, 0.0], [0.03, 5e-3]], rtol=1e-12)
+    depths = table.at(np.array([0.0, 0.05, 0.2]))[3]
+    np.testing.assert_allclose(depths, [[0.01, 0.0], [0.02, 2.5e-3], [0.03, 5e-3]], rtol=1e-12)
+    path.write_text("t_s,tension_1_N,insertion_2_mm\n0,0,0\n")
+    with pytest.raises(ValueError, match="columns insertion_2_mm: give every tube's depth"):
+        cli.read_input_table(path, 1, 2)
+    paper = tmp_path / "paper.csv"
+    paper.write_text("t_s,tension_1_N,tension_2_N,tension_3_N,tension_4_N,insertion_1_mm\n0,0,0,0,0,10\n0.01,1,0,0,0,20\n")
+    assert main(["simulate", "--inputs", str(paper), "--dt-ms", "1", "--insertion-mm", "10"]) == 2
+    assert (
+        "--insertion-mm and the input table's insertion columns: give the tube depths in one of them" in capsys.readouterr().err
+    )
 
 
 # ---- one short simulation ---------------------------------------------------------------------
