@@ -1271,7 +1271,7 @@ def _write_trajectory(out: Path, traj, tip_force, args, dt: float) -> list[Path]
     csv_path.write_text("\n".join([",".join(names), *rows]) + "\n")
     units = dict(
         t="s", s="m", position="m", rotation="1 (world from body)", force="N", moment="N m", velocity="m/s",
-        angular_velocity="rad/s", tensions="N", displacements="m", insertions="m", tip_force="N",
+        angular_velocity="rad/s", tensions="N", tendon_tension="N", displacements="m", insertions="m", tip_force="N",
         iterations="chord and Newton steps",
         result="tdct_jax.status code, 0 converged", residual_norm="1 (scaled tip residual, max norm)",
     )  # fmt: skip

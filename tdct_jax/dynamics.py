@@ -36,6 +36,9 @@ steps, then Newton's method (a jacfwd Jacobian, one forward pass for all interva
 Levenberg-Marquardt where a step does not lower the residual) start from the last three roots
 extrapolated (``_extrapolate``, ``_step``), and the root passes ``lax.custom_root``: derivatives of any trajectory
 output with respect to every input go through each step's implicit solve.
+
+Tendon friction takes statics' rows, the last time step's tension profile as the memory
+(``_integrate``); tubes that move carry the history to the moved stage points (``remap``).
 """
 
 from __future__ import annotations
@@ -53,7 +56,7 @@ from .checks import as_array, check_range, is_concrete
 from .description import Robot
 from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
-from .segments import E3, Segment, State, body_strains, tendon_pb
+from .segments import E3, Segment, State, body_strains, tendon_pb, tendon_tangents
 from .so3 import cayley, hat, orthonormalize, vee_skew
 from .solve import solve
 from .tree import pytree
@@ -70,9 +73,11 @@ sudden 2 N pull at 5 ms steps; four intervals converge at every step (docs/dynam
 
 def default_solver(robot: Robot, load: Loads, steps: int = DEFAULT_SOLVER.steps, **options) -> SolverOptions:
     """``simulate``'s solver by default: statics' options (``options`` override them) with the
-    largest shooting-interval count up to ``INTERVALS`` that divides the robot's RK4 steps."""
+    largest shooting-interval count up to ``INTERVALS`` that divides the robot's RK4 steps (one
+    with tendon friction: the tension profiles are carried by single shooting)."""
     n = rod.n_intervals(robot, load) * steps
-    return SolverOptions(steps=steps, intervals=max(k for k in range(1, INTERVALS + 1) if n % k == 0), **options)
+    most = 1 if robot.has_friction else INTERVALS
+    return SolverOptions(steps=steps, intervals=max(k for k in range(1, most + 1) if n % k == 0), **options)
 
 
 class Scheme(NamedTuple):
@@ -95,12 +100,14 @@ STATIC = Scheme(0.0, 0.0, 0.0, 0.0)
 
 class Dyn(NamedTuple):
     """The state along s: the static State y, the body-frame velocity q [m/s] and angular
-    velocity w [rad/s], and each tendon's rest length from the interval's start l [m] (n_t,)."""
+    velocity w [rad/s], each tendon's rest length from the interval's start l [m] (n_t,), and
+    with tendon friction the tendons' ``rod.Friction`` state (None without)."""
 
     y: State
     q: jax.Array
     w: jax.Array
     l: jax.Array
+    f: rod.Friction | None = None
 
 
 class Layout(NamedTuple):
@@ -146,39 +153,67 @@ def layout(robot: Robot, act: Actuation, load: Loads, gravity, steps: int) -> La
     )
 
 
-def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stages, start: Dyn):
+def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stages, start: Dyn, memory=None):
     """RK4 along the steps of ``lay`` from ``start`` with the stage points' history terms
     ``stages`` (v_h, u_h, q_h, w_h) (n, 4, 12). Returns the end, the nodes (n + 1 Dyn) and what
     the history is made of: each stage point's (v - e3, u, q, w) (the strain rather than v, so
     that c0 z + z_h does not cancel a unit vector's rounding times c0). A point mass m at a step's start
     takes m (g - p_tt) from N, p_tt = R (q_t + w x q) there (stage 1's history). The tendons' rest
-    lengths grow as in statics (``rod.integrate``: dl = |p_b| / (1 + tau / EA) where present)."""
+    lengths grow as in statics (``rod.integrate``: dl = |p_b| / (1 + tau / EA) where present).
+
+    With tendon friction each step's span keeps one tension per tendon, and at the node that ends
+    it the next span's is the last time step's there (``memory``, (n, n_t); None: zeros, loaded
+    from slack) held within the capstan bounds, as in statics (``rod.integrate``'s guides; the
+    tangents there from the step's fourth stage's history)."""
     after = jnp.array([0.5, 0.5, 1.0])
     weights = jnp.array([1.0, 2.0, 2.0, 1.0]) / 6
     f_d = load.distributed_force
     EA = rod.tendon_stiffness(robot) if robot.tendons else jnp.zeros(0)
 
-    def field(P: rod.Interval, s, z_h, d: Dyn):
+    def spans(P: rod.Interval, d: Dyn) -> rod.Interval:
+        return P if d.f is None else P._replace(tau=P.present * d.f.tau)
+
+    def strains(P: rod.Interval, s, z_h, d: Dyn):
+        """The segment and the damped constitutive relation's (v, u) at the state d."""
         seg = rod._segment(robot, P, s)
         a = 1.0 + c.c0 * P.damping
-        v_h, u_h, q_h, w_h = z_h[:3], z_h[3:6], z_h[6:9], z_h[9:]
         stiff = Segment(seg.K_se * a, seg.K_bt * a, seg.rho, seg.tau, seg.r, seg.backbone, seg.tilt, seg.dr)
-        R = d.y.R
         # K' (v - v*') with K' = a K, v*' = e3 - tau_d v_h / a: the static relation shifted by K' (v*' - e3)
-        bf = R.T @ d.y.N - seg.K_se * P.damping * v_h
-        bm = R.T @ d.y.M - seg.K_bt * P.damping * u_h
-        v, u = body_strains(stiff, bf, bm)
+        bf = d.y.R.T @ d.y.N - seg.K_se * P.damping * z_h[:3]
+        bm = d.y.R.T @ d.y.M - seg.K_bt * P.damping * z_h[3:6]
+        return (seg, *body_strains(stiff, bf, bm))
+
+    def field(P: rod.Interval, s, z_h, d: Dyn):
+        seg, v, u = strains(spans(P, d), s, z_h, d)
+        v_h, u_h, q_h, w_h = z_h[:3], z_h[3:6], z_h[6:9], z_h[9:]
         v_t, u_t, q_t, w_t = c.c0 * (v - E3) + v_h, c.c0 * u + u_h, c.c0 * d.q + q_h, c.c0 * d.w + w_h
+        R = d.y.R
         dp = R @ v
         dN = -P.rho * gravity - f_d + P.rho * (R @ (q_t + jnp.cross(d.w, d.q)))
         dM = -jnp.cross(dp, d.y.N) + R @ (P.rhoJ * w_t + jnp.cross(d.w, P.rhoJ * d.w))
         dq = v_t - jnp.cross(u, d.q) + jnp.cross(d.w, v)
         dw = u_t - jnp.cross(u, d.w)
         dl = P.present * jnp.linalg.norm(tendon_pb(seg, v, u), axis=-1) / (1 + seg.tau / EA)
-        return Dyn(State(dp, R @ hat(u), dN, dM), dq, dw, dl), jnp.concatenate([v - E3, u, d.q, d.w])
+        df = None if d.f is None else jax.tree.map(jnp.zeros_like, d.f)
+        return Dyn(State(dp, R @ hat(u), dN, dM), dq, dw, dl, df), jnp.concatenate([v - E3, u, d.q, d.w])
+
+    def tangents(P: rod.Interval, s, z_h, d: Dyn):
+        """Each tendon's world tangent at d, (n_t, 3) (tensions: the span just integrated)."""
+        seg, v, u = strains(spans(P, d), s, z_h, d)
+        return tendon_tangents(seg, v, u) @ d.y.R.T
+
+    def guide(P: rod.Interval, s, h, z_h, d: Dyn, previous) -> Dyn:
+        """``rod.integrate``'s guide at the node d at s ending a step of length h."""
+        T = tangents(P, s, z_h, d)
+        phi = d.f.phi + P.mu * rod._turning(d.f.T, T)
+        spacing = jnp.where(P.spacing > 0, P.spacing, 1.0)
+        here = (P.spacing <= 0) | (jnp.floor(s / spacing) > jnp.floor((s - h) / spacing))
+        bound = jnp.exp(phi)
+        held = jnp.minimum(jnp.maximum(previous, d.f.base / bound), d.f.base * bound)
+        return d._replace(f=d.f._replace(tau=jnp.where(here, held, d.f.tau), T=T, phi=phi))
 
     def step(d: Dyn, k):
-        P, s0, h, dN, dM, m, z_h = k
+        P, s0, h, dN, dM, m, z_h, previous = k
         d = d._replace(y=d.y._replace(N=d.y.N + dN + m * _acceleration(c, d, z_h[0, 6:9]), M=d.y.M + dM))
         k1, z1 = field(P, s0, z_h[0], d)
         k2, z2 = field(P, s0 + h / 2, z_h[1], jax.tree.map(lambda a, b: a + h * after[0] * b, d, k1))
@@ -187,9 +222,18 @@ def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stage
         ks = (k1, k2, k3, k4)
         new = jax.tree.map(lambda a, *b: a + h * sum(w * bi for w, bi in zip(weights, b, strict=True)), d, *ks)
         new = new._replace(y=new.y._replace(R=orthonormalize(new.y.R)))
+        if new.f is not None:
+            new = guide(P, s0 + h, h, z_h[3], new, previous)
         return new, (new, jnp.stack([z1, z2, z3, z4]))
 
-    end, (nodes, z) = lax.scan(step, start, (lay.P, lay.s0, lay.h, lay.dN, lay.dM, lay.mass, stages))
+    if robot.has_friction and start.f is None:
+        P0 = jax.tree.map(lambda a: a[0], lay.P)
+        n_t = robot.n_tendons
+        start = start._replace(f=rod.Friction(P0.tau, P0.tau, jnp.zeros((n_t, 3)), jnp.zeros(n_t)))
+        start = start._replace(f=start.f._replace(T=tangents(P0, lay.s0[0], stages[0, 0], start)))
+    memory = jnp.zeros((lay.h.size, robot.n_tendons)) if memory is None else memory
+    xs = (lay.P, lay.s0, lay.h, lay.dN, lay.dM, lay.mass, stages, memory)
+    end, (nodes, z) = lax.scan(step, start, xs)
     return end, jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), start, nodes), z
 
 
@@ -265,8 +309,8 @@ def _scale(F_c, L, dt):
 class Problem(NamedTuple):
     """One time step's boundary-value problem at given inputs: the robot, actuation (tensions,
     the driven tendons' commanded displacements), loads, gravity, scheme, history ((n_steps, 4,
-    12) stage points, (6,) tip), force scale F_c, ``_scale``, K and RK4 steps per breakpoint
-    interval."""
+    12) stage points, (6,) tip), the last step's span tensions (``_integrate``'s memory, (n_steps,
+    n_t)), force scale F_c, ``_scale``, K and RK4 steps per breakpoint interval."""
 
     robot: Robot
     act: Actuation
@@ -274,6 +318,7 @@ class Problem(NamedTuple):
     gravity: jax.Array
     c: Scheme
     history: tuple
+    memory: jax.Array
     F_c: jax.Array
     S: jax.Array
     K: int
@@ -298,8 +343,10 @@ class Problem(NamedTuple):
         zeros = jnp.zeros((K, 3))
         start = Dyn(State(zeros, R, y[:, :3], y[:, 3:6]), y[:, 6:9], y[:, 9:], jnp.zeros((K, self.robot.n_tendons)))
         per = jax.tree.map(split, lay._replace(plan=None))
-        integrate = jax.vmap(lambda lay, stages, d: _integrate(self.robot, self.load, self.gravity, lay, self.c, stages, d))
-        return integrate(per, split(self.history[0]), start)
+        integrate = jax.vmap(
+            lambda lay, stages, d, memory: _integrate(self.robot, self.load, self.gravity, lay, self.c, stages, d, memory)
+        )
+        return integrate(per, split(self.history[0]), start, split(self.memory))
 
     def starts(self, u: Unknowns):
         """Every interval's start rotation (K, 3, 3) and (N, M, q, w) (K, 12); the base's R = I, q = w = 0."""
@@ -321,11 +368,12 @@ class Problem(NamedTuple):
     def residual(self, u: Unknowns):
         """Continuity at every interior start ((K - 1) 15, flattened), then the tip's (6,) and
         the driven tendons' (n_d,); and the run (ends, nodes, stage values) with the tendon
-        tensions (a slack driven tendon's exactly 0, as in statics)."""
+        tensions (a slack driven tendon's exactly 0, as in statics) and each RK4 step's
+        (frictionless) tensions, (n_steps, n_t)."""
         lay = self.layout(u.x)
         out = self.run(lay, *self.starts(u))
         cont, tail, slack = self.closing(lay, u.x, out[0], _next_rotations(u))
-        return _stacked(u, cont, tail), (*out, jnp.where(slack, 0.0, self.actuation(u.x).tensions))
+        return _stacked(u, cont, tail), (*out, jnp.where(slack, 0.0, self.actuation(u.x).tensions), lay.P.tau)
 
     def linearize(self, u: Unknowns):
         """The residual and its Jacobian in (x, each interior's rotation (I + w^) R, then z): one
@@ -466,7 +514,7 @@ def _step(problem_at, guess: Unknowns, previous: Unknowns, solver: SolverOptions
 
     Returns the root, the StepInfo (chord and Newton steps and the code of the search, the
     residual of the run at the root: the same to rounding) and that run (ends, nodes, stage
-    values, tensions: ``Problem.residual``)."""
+    values, tensions, span tensions: ``Problem.residual``)."""
     guess, previous = lax.stop_gradient((guess, previous))
     full = problem_at(1.0, frozen=True)
     r, J = full.linearize(guess)
@@ -538,6 +586,9 @@ class Trajectory:
         velocity: p_t [m/s] and angular_velocity: R w [rad/s], (n, m, 3).
         tensions: the tendon tensions [N], (n, n_t): the given ones and those found for
             displacement-driven tendons (slack: 0).
+        tendon_tension: each tendon's tension at every node [N], (n, m, n_t): that of the span
+            starting there (the tip: the last span's), zero beyond its anchor; with tendon
+            friction it falls or rises along the tendon (``Solution.tendon_tension`` of statics).
         displacements: what each tendon's encoder reads [m], (n, n_t): its rest length inside
             the straight robot less its present one (``rod.displacements``).
         insertions: each tube's depth [m], (n, n_tubes).
@@ -556,6 +607,7 @@ class Trajectory:
     velocity: jax.Array
     angular_velocity: jax.Array
     tensions: jax.Array
+    tendon_tension: jax.Array
     displacements: jax.Array
     insertions: jax.Array
     iterations: jax.Array
@@ -610,8 +662,6 @@ def _inputs(robot: Robot, load: Loads, driven: tuple, given: dict, n: int | None
 def check(robot: Robot, act: Actuation, load: Loads, solver: SolverOptions) -> None:
     """What ``simulate`` does not handle yet, refused by name; statics' checks of robot and inputs
     together (``act``: the driven tendons' largest displacements)."""
-    if robot.has_friction:
-        raise ValueError("sections[*].friction: tendon friction is not simulated yet; give none")
     if load.scene is not None:
         raise ValueError("scene: contact is not simulated yet")
     if solver.transition != "balanced" or solver.tendon_model != "exact":
@@ -700,6 +750,10 @@ def simulate(
     rows, n = _inputs(robot, load, driven, given, None if steps is None else steps + 1)
     T, D, F, C, PF, PM, I = rows
     moving = np.ndim(insertions) == 2
+    if moving and robot.has_friction:
+        raise ValueError(
+            "insertions along time with tendon friction: not simulated yet (the tension profiles are not carried with the moving nodes); hold the tubes still"
+        )
     act = Actuation(T[0], I[0], D[0], driven)
     check(robot, Actuation(T[0], I[0], jnp.max(D, 0), driven), load, solver)
     if moving and is_concrete(robot.length) and is_concrete(I):
@@ -755,37 +809,41 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
     def breakpoints(robot, act_i, ld):
         return rod.plan(robot, act_i, ld, gravity).b
 
-    def problem(i, c_i, history, b_old, lam=1.0, frozen=False):
+    def problem(i, c_i, history, b_old, memory, lam=1.0, frozen=False):
         """Row i's Problem; ``history`` at the stage points of breakpoints ``b_old`` (the last step's)."""
         act_i, ld = inputs(i, lam)
-        parts = (robot, act_i, ld, gravity, c_i, history, b_old)
-        robot_, act_i, ld, gravity_, c_i, history, b_old = lax.stop_gradient(parts) if frozen else parts
+        parts = (robot, act_i, ld, gravity, c_i, history, b_old, memory)
+        robot_, act_i, ld, gravity_, c_i, history, b_old, memory = lax.stop_gradient(parts) if frozen else parts
         if moving:
             history = (remap(history[0], b_old, breakpoints(robot_, act_i, ld), solver.steps), history[1])
         F_c = rod.force_scale(robot_, act_i, ld, gravity_)
-        return Problem(robot_, act_i, ld, gravity_, c_i, history, F_c, _scale(F_c, L, dt), K, solver.steps)
+        return Problem(robot_, act_i, ld, gravity_, c_i, history, memory, F_c, _scale(F_c, L, dt), K, solver.steps)
 
     def advance(carry, i):
-        (u, before, earlier), z1, z2, zt1, b_old = carry
+        (u, before, earlier), z1, z2, zt1, b_old, memory = carry
         ci = jax.tree.map(lambda a: jnp.where(i == 0, 0.0, a), c)
         history = jax.tree.map(lambda a, b, d: ci.c1 * a + ci.c2 * b + ci.d1 * d, z1, z2, zt1)
-        at = problem(i, ci, history, b_old)
+        at = problem(i, ci, history, b_old, memory)
         b = breakpoints(robot, *inputs(i))
         guess = _extrapolate(u, before, earlier, jnp.clip(i - 1, 0, 2))
         guess, previous = (v.scaled(at.F_c, at.S) for v in (guess, u))
-        root, info, (ends, nodes, z, tensions) = _step(
-            lambda lam, frozen=False: problem(i, ci, history, b_old, lam, frozen), guess, previous, solver
+        root, info, (ends, nodes, z, tensions, spans) = _step(
+            lambda lam, frozen=False: problem(i, ci, history, b_old, memory, lam, frozen), guess, previous, solver
         )
         offsets = jnp.cumsum(ends.y.p, 0) - ends.y.p  # each interval ran from p = 0 and l = 0
         lengths = jnp.cumsum(ends.l, 0) - ends.l
         nodes = nodes._replace(y=nodes.y._replace(p=nodes.y.p + offsets[:, None]), l=nodes.l + lengths[:, None])
         nodes = jax.tree.map(lambda a: jnp.concatenate([a[:, :-1].reshape(-1, *a.shape[2:]), a[-1, -1:]]), nodes)
+        if nodes.f is not None:  # node j's tension: span j's (the tip's: the last span's, as in statics)
+            spans = nodes.f.tau[:-1]
+            memory = jnp.concatenate([spans[1:], spans[-1:]])
         z = (z.reshape(n_nodes, 4, 12), jnp.concatenate([ends.q[-1], ends.w[-1]]))
         zt = jax.tree.map(lambda a, b: ci.c0 * a + b, z, at.history)
         if moving:
             z1 = (remap(z1[0], b_old, b, solver.steps), z1[1])
         older = jax.tree.map(lambda a, b: jnp.where(i == 0, a, b), z, z1)  # the next step's z(t - 2 dt)
-        return ((root.physical(at.F_c, at.S), u, before), z, older, zt, b), (nodes, tensions, info, b)
+        profile = jnp.concatenate([spans, spans[-1:]])
+        return ((root.physical(at.F_c, at.S), u, before), z, older, zt, b, memory), (nodes, tensions, profile, info, b)
 
     act0, load0 = inputs(0)
     rest = (jnp.zeros((n_nodes, 4, 12)), jnp.zeros(6))
@@ -795,9 +853,10 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
     y = _integrate(robot, load0, gravity, lay0._replace(plan=None), STATIC, rest[0], at_base)[1]
     inner = jax.tree.map(lambda a: a[n_nodes // K : n_nodes : n_nodes // K], y)
     u0 = Unknowns(base.at[3:6].divide(L), inner.y.R, jnp.concatenate([inner.y.N, inner.y.M, inner.q, inner.w], -1))
-    start = ((u0, u0, u0), rest, rest, jax.tree.map(jnp.zeros_like, rest), lay0.plan.b)
+    slack = jnp.zeros((n_nodes, robot.n_tendons))  # the first step's span tensions: loaded from slack
+    start = ((u0, u0, u0), rest, rest, jax.tree.map(jnp.zeros_like, rest), lay0.plan.b, slack)
     step = jax.checkpoint(advance) if checkpoint else advance
-    _, (nodes, tensions, info, b) = lax.scan(step, start, jnp.arange(0 if static_start else 1, T.shape[0]))
+    _, (nodes, tensions, profile, info, b) = lax.scan(step, start, jnp.arange(0 if static_start else 1, T.shape[0]))
     s = jax.vmap(lambda b: jnp.concatenate([_points(b, solver.steps).reshape(-1), b[-1:]]))(b)
     displacements = jax.vmap(lambda l: rod.displacements(robot, l))(nodes.l[:, -1])
     if not static_start:  # the straight, unstrained robot at rest
@@ -805,8 +864,9 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
         n = s0.size
         zeros = jnp.zeros((n, 3))
         straight = Dyn(State(s0[:, None] * E3[None], jnp.broadcast_to(jnp.eye(3), (n, 3, 3)), zeros, zeros), zeros, zeros, None)
-        nodes = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), straight, nodes._replace(l=None))
+        nodes = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), straight, nodes._replace(l=None, f=None))
         s = jnp.concatenate([s0[None], s])
+        profile = jnp.concatenate([jnp.concatenate([lay0.P.tau, lay0.P.tau[-1:]])[None], profile])
         tensions = jnp.concatenate([T[:1], tensions])
         displacements = jnp.concatenate([jnp.zeros((1, robot.n_tendons)), displacements])
         first = StepInfo(jnp.int32(0), jnp.int32(status.SUCCESS), jnp.zeros(()))
@@ -822,6 +882,7 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
         jnp.einsum("...ij,...j->...i", y.R, nodes.q),
         jnp.einsum("...ij,...j->...i", y.R, nodes.w),
         tensions,
+        profile,
         displacements,
         rows[6],
         info.iterations,

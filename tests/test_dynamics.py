@@ -207,6 +207,41 @@ def test_global_momentum_balance():
     assert late[50] / late[100] > 3.0
 
 
+def test_tendon_friction_keeps_statics_hysteresis_and_settles_onto_solve_with_its_memory():
+    """Tendon friction (mu = 0.3) on the critically damped rod under gravity, single shooting:
+    pulled to 2 N and released to 1 N, slowly (3 periods a ramp), it settles 1.3 um from where a
+    pull straight to 1 N settles (the hysteresis no memoryless model has). Each settled pose is
+    ``solve``'s with the last step's tension profile as its memory (1e-12 m), and each agrees with
+    statics' chain of poses (solve at 2 N from slack, then at 1 N with that memory; solve at 1 N)
+    within 0.1 um, a tenth of the gap."""
+    rough = robot(2 / OMEGA[0]).replace({"sections[0].friction": 0.3})
+    solver = tdct.SolverOptions(steps=20, intervals=1)
+    g = (0.0, -9.81, 0.0)
+    t = np.arange(STEPS + 1) * T1 / 20
+
+    def ramp(a, b):
+        return np.clip((t - a) / (b - a), 0.0, 1.0)[:, None]
+
+    def settled(tensions):
+        traj = simulate(rough, T1 / 20, tensions=tensions, gravity=g, solver=solver)
+        assert bool(traj.converged)
+        memory = tdct.Actuation(traj.tensions[-1], memory=traj.tendon_tension[-2])
+        static = tdct.solve(rough, memory, gravity=g, solver=solver)
+        np.testing.assert_allclose(traj.tip_position[-1], static.tip_position, rtol=0, atol=1e-12)
+        return np.asarray(traj.tip_position[-1]), traj
+
+    released, traj = settled(2.0 * ramp(0, 3 * T1) - ramp(6 * T1, 9 * T1))
+    pulled, _ = settled(ramp(0, 3 * T1))
+    assert np.linalg.norm(released - pulled) > 1e-6
+    profile = np.asarray(traj.tendon_tension[-1, :, 0])
+    assert profile[0] == 1.0 and profile[-1] > 1.001  # released: the tension rises toward the tip
+    first = tdct.solve(rough, tdct.Actuation([2.0]), gravity=g, solver=solver)
+    chain = tdct.solve(rough, tdct.Actuation([1.0], memory=first.tendon_tension), gravity=g, solver=solver)
+    direct = tdct.solve(rough, tdct.Actuation([1.0]), gravity=g, solver=solver)
+    np.testing.assert_allclose(released, chain.tip_position, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(pulled, direct.tip_position, rtol=0, atol=1e-7)
+
+
 def tubed(tube_E, tube_density, damping=0.0):
     """The rod as a tube (1 mm bore) with a tube of its own inside, pushed along it in time."""
     section = tdct.Section(end=L, outer_diameter=D, inner_diameter=1e-3, E=E, nu=0.3, density=RHO, damping=damping)
@@ -346,8 +381,10 @@ def test_a_step_that_does_not_converge_raises_naming_its_time_and_numbers(runs, 
 
 def test_what_is_not_simulated_yet_is_refused():
     rough = robot().replace({"sections[0].friction": 0.1})
-    with pytest.raises(ValueError, match="friction"):
-        simulate(rough, 1e-3, 4)
+    with pytest.raises(ValueError, match="intervals = 4 with tendon friction"):
+        simulate(rough, 1e-3, 4, tensions=[0.0], solver=tdct.SolverOptions(intervals=4))
+    with pytest.raises(ValueError, match="insertions along time with tendon friction"):
+        simulate(tubed(75e9, 6450.0).replace({"sections[0].friction": 0.1}), 1e-3, 4, insertions=np.zeros((5, 1)))
 
 
 @pytest.mark.slow

@@ -136,16 +136,15 @@ def test_bad_flag_exits_2_before_anything_is_simulated(flags, words, files, tmp_
     assert err.startswith("tdct: error: ") and words in err and "Traceback" not in err, err
 
 
-def test_unreadable_table_and_robot_with_friction_are_refused(files, tmp_path, capsys, nothing_simulated):
+def test_unreadable_table_and_friction_with_multiple_shooting_are_refused(files, tmp_path, capsys, nothing_simulated):
     missing = tmp_path / "none.csv"
     assert main(["simulate", "--robot", str(files / "rod.toml"), "--inputs", str(missing), "--dt-ms", "1"]) == 2
     assert f"tdct: error: {missing}: cannot read input table: " in capsys.readouterr().err
     rubbing = tmp_path / "friction.toml"
     rubbing.write_text(ROD.replace("damping = 0.001", "damping = 0.001\nfriction = 0.1"))
-    assert main(["simulate", "--robot", str(rubbing), "--inputs", str(files / "inputs.csv"), "--dt-ms", "1"]) == 2
-    assert (
-        f"tdct: error: --robot {rubbing}: sections[*].friction: tendon friction is not simulated yet" in capsys.readouterr().err
-    )
+    argv = ["simulate", "--robot", str(rubbing), "--inputs", str(files / "inputs.csv"), "--dt-ms", "1", "--intervals", "4"]
+    assert main(argv) == 2
+    assert f"tdct: error: --robot {rubbing}: solver intervals = 4 with tendon friction" in capsys.readouterr().err
 
 
 def test_displacement_columns_drive_their_tendons_in_metres(tmp_path):
