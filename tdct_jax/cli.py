@@ -455,6 +455,7 @@ def _parser() -> argparse.ArgumentParser:
         "steps); more where small steps or sudden inputs make a step fail",
     )
     _depth_flags(m, ", held in time (tubes that move: the input table's insertion_i_mm columns)")
+    m.add_argument("--scene", metavar="scene.toml", help=SCENE_HELP + " (single shooting), the contact forces in the .npz")
     m.add_argument(
         "--out",
         metavar="DIR",
@@ -1140,10 +1141,16 @@ def _simulate_command(args) -> int:
         check_output("--out", args.out, folder=True)
     robot = _robot(args)
     solver = _solver(args)
+    scene = _scene(args, robot)
     if args.intervals is None:
-        solver = default_solver(robot, Loads(), steps=solver.steps, max_iter=solver.max_iter)
+        obstacles = Loads() if scene is None else Loads().with_scene(scene)
+        solver = default_solver(robot, obstacles, steps=solver.steps, max_iter=solver.max_iter)
     else:
         check_flag("--intervals", args.intervals, 1)
+        if scene is not None and args.intervals > 1:
+            raise ValueError(
+                f"--scene with --intervals {args.intervals}: contact is solved by single shooting; give --intervals 1"
+            )
         solver = SolverOptions(steps=solver.steps, max_iter=solver.max_iter, intervals=args.intervals)
     depths = _depths_typed(args, robot)
     try:
@@ -1187,6 +1194,7 @@ def _simulate_command(args) -> int:
         driven=table.driven,
         tip_force=tip_force,
         insertions=[d * 1e-3 for d in depths] if insertions is None else insertions,
+        scene=scene,
         start=args.start,
         alpha=args.alpha,
         gravity=_gravity(args),
@@ -1220,7 +1228,7 @@ def _simulate_command(args) -> int:
         from .plotting import animate_trajectory
 
         with tqdm(total=min(args.frames, good), desc="animating", unit="frame", disable=args.quiet, leave=False) as bar:
-            animate_trajectory(shown, args.gif, frames=args.frames, title=title, progress=lambda i, n: bar.update(1))
+            animate_trajectory(shown, args.gif, frames=args.frames, title=title, progress=lambda i, n: bar.update(1), scene=scene)
         written.append(args.gif)
     if written:
         print(f"wrote {', '.join(map(str, written))}")
@@ -1272,6 +1280,7 @@ def _write_trajectory(out: Path, traj, tip_force, args, dt: float) -> list[Path]
     units = dict(
         t="s", s="m", position="m", rotation="1 (world from body)", force="N", moment="N m", velocity="m/s",
         angular_velocity="rad/s", tensions="N", tendon_tension="N", displacements="m", insertions="m", tip_force="N",
+        contact_force="N (candidates x obstacles)", contact_gap="m",
         iterations="chord and Newton steps",
         result="tdct_jax.status code, 0 converged", residual_norm="1 (scaled tip residual, max norm)",
     )  # fmt: skip

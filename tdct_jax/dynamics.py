@@ -51,14 +51,14 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from . import newton, rod, status
+from . import contact, newton, rod, status
 from .checks import as_array, check_range, is_concrete
 from .description import Robot
 from .inputs import STANDARD_GRAVITY, Actuation, Loads, gravity_vector
 from .options import DEFAULT_SOLVER, SolverOptions
 from .segments import E3, Segment, State, body_strains, tendon_pb, tendon_tangents
 from .so3 import cayley, hat, orthonormalize, vee_skew
-from .solve import solve
+from .solve import solve, with_scene
 from .tree import pytree
 
 ALPHA = -0.2
@@ -74,9 +74,10 @@ sudden 2 N pull at 5 ms steps; four intervals converge at every step (docs/dynam
 def default_solver(robot: Robot, load: Loads, steps: int = DEFAULT_SOLVER.steps, **options) -> SolverOptions:
     """``simulate``'s solver by default: statics' options (``options`` override them) with the
     largest shooting-interval count up to ``INTERVALS`` that divides the robot's RK4 steps (one
-    with tendon friction: the tension profiles are carried by single shooting)."""
+    with tendon friction or a scene in ``load``: single shooting carries the tension profiles and
+    the contact candidates' absolute positions)."""
     n = rod.n_intervals(robot, load) * steps
-    most = 1 if robot.has_friction else INTERVALS
+    most = 1 if robot.has_friction or load.scene is not None else INTERVALS
     return SolverOptions(steps=steps, intervals=max(k for k in range(1, most + 1) if n % k == 0), **options)
 
 
@@ -153,7 +154,7 @@ def layout(robot: Robot, act: Actuation, load: Loads, gravity, steps: int) -> La
     )
 
 
-def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stages, start: Dyn, memory=None):
+def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stages, start: Dyn, memory=None, forces=None):
     """RK4 along the steps of ``lay`` from ``start`` with the stage points' history terms
     ``stages`` (v_h, u_h, q_h, w_h) (n, 4, 12). Returns the end, the nodes (n + 1 Dyn) and what
     the history is made of: each stage point's (v - e3, u, q, w) (the strain rather than v, so
@@ -164,7 +165,12 @@ def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stage
     With tendon friction each step's span keeps one tension per tendon, and at the node that ends
     it the next span's is the last time step's there (``memory``, (n, n_t); None: zeros, loaded
     from slack) held within the capstan bounds, as in statics (``rod.integrate``'s guides; the
-    tangents there from the step's fourth stage's history)."""
+    tangents there from the step's fourth stage's history).
+
+    ``forces``: with ``load.scene``, each step's contact forces against its obstacles [N] (n,
+    n_o) (nonzero at candidates only): N jumps at the step's start by the point force -sum_o
+    lambda_o n_o(p) (contact.py), p the absolute position (single shooting); the fourth output
+    is then every step start's ``contact.Starts`` (position and gaps), else None."""
     after = jnp.array([0.5, 0.5, 1.0])
     weights = jnp.array([1.0, 2.0, 2.0, 1.0]) / 6
     f_d = load.distributed_force
@@ -213,8 +219,12 @@ def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stage
         return d._replace(f=d.f._replace(tau=jnp.where(here, held, d.f.tau), T=T, phi=phi))
 
     def step(d: Dyn, k):
-        P, s0, h, dN, dM, m, z_h, previous = k
+        P, s0, h, dN, dM, m, z_h, previous, f = k
         d = d._replace(y=d.y._replace(N=d.y.N + dN + m * _acceleration(c, d, z_h[0, 6:9]), M=d.y.M + dM))
+        touch = None
+        if f is not None:
+            F, touch = contact.at_start(load.scene, f, d.y.p, P.radius)
+            d = d._replace(y=d.y._replace(N=d.y.N - F))
         k1, z1 = field(P, s0, z_h[0], d)
         k2, z2 = field(P, s0 + h / 2, z_h[1], jax.tree.map(lambda a, b: a + h * after[0] * b, d, k1))
         k3, z3 = field(P, s0 + h / 2, z_h[2], jax.tree.map(lambda a, b: a + h * after[1] * b, d, k2))
@@ -224,7 +234,7 @@ def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stage
         new = new._replace(y=new.y._replace(R=orthonormalize(new.y.R)))
         if new.f is not None:
             new = guide(P, s0 + h, h, z_h[3], new, previous)
-        return new, (new, jnp.stack([z1, z2, z3, z4]))
+        return new, (new, jnp.stack([z1, z2, z3, z4]), touch)
 
     if robot.has_friction and start.f is None:
         P0 = jax.tree.map(lambda a: a[0], lay.P)
@@ -232,9 +242,9 @@ def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stage
         start = start._replace(f=rod.Friction(P0.tau, P0.tau, jnp.zeros((n_t, 3)), jnp.zeros(n_t)))
         start = start._replace(f=start.f._replace(T=tangents(P0, lay.s0[0], stages[0, 0], start)))
     memory = jnp.zeros((lay.h.size, robot.n_tendons)) if memory is None else memory
-    xs = (lay.P, lay.s0, lay.h, lay.dN, lay.dM, lay.mass, stages, memory)
-    end, (nodes, z) = lax.scan(step, start, xs)
-    return end, jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), start, nodes), z
+    xs = (lay.P, lay.s0, lay.h, lay.dN, lay.dM, lay.mass, stages, memory, forces)
+    end, (nodes, z, touch) = lax.scan(step, start, xs)
+    return end, jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), start, nodes), z, touch
 
 
 def _acceleration(c: Scheme, d: Dyn, q_h):
@@ -306,11 +316,19 @@ def _scale(F_c, L, dt):
     return jnp.repeat(jnp.stack([F_c, F_c * L, L / dt, 1.0 / dt]), 3)
 
 
+def _candidates(robot: Robot, load: Loads, steps: int) -> np.ndarray:
+    """The RK4 steps whose starts are the interior contact candidates of ``load.scene`` (a
+    candidate every ``scene.every`` steps, the base excluded; the tip's comes last)."""
+    n = rod.n_intervals(robot, load) * steps
+    return load.scene.every * np.arange(1, contact.n_candidates(1, n, load.scene.every))
+
+
 class Problem(NamedTuple):
     """One time step's boundary-value problem at given inputs: the robot, actuation (tensions,
     the driven tendons' commanded displacements), loads, gravity, scheme, history ((n_steps, 4,
     12) stage points, (6,) tip), the last step's span tensions (``_integrate``'s memory, (n_steps,
-    n_t)), force scale F_c, ``_scale``, K and RK4 steps per breakpoint interval."""
+    n_t)), force scale F_c, ``_scale``, K, RK4 steps per breakpoint interval and the contact
+    rows' smoothing mu (``contact.fischer_burmeister``)."""
 
     robot: Robot
     act: Actuation
@@ -323,19 +341,43 @@ class Problem(NamedTuple):
     S: jax.Array
     K: int
     steps: int
+    mu: jax.Array = 0.0
 
     def actuation(self, x) -> Actuation:
         """The actuation with the driven tendons' tensions of the unknowns x."""
         return rod.with_driven(self.act, x, self.F_c)
 
+    @property
+    def n_extra(self) -> int:
+        """The unknowns after the base wrench: driven tensions, then contact forces (n_c n_o)."""
+        return len(self.act.driven) + self.n_contact
+
+    @property
+    def n_contact(self) -> int:
+        scene = self.load.scene
+        return 0 if scene is None else (self.candidates.size + 1) * scene.n_obstacles
+
+    @property
+    def candidates(self) -> np.ndarray:
+        return _candidates(self.robot, self.load, self.steps)
+
+    def forces(self, x):
+        """The contact forces of the unknowns x [N], (n_c, n_o), the tip's last; None without a scene."""
+        if self.load.scene is None:
+            return None
+        return x[6 + len(self.act.driven) :].reshape(-1, self.load.scene.n_obstacles) * self.F_c
+
     def layout(self, x) -> Layout:
         return layout(self.robot, self.actuation(x), self.load, self.gravity, self.steps)
 
-    def run(self, lay: Layout, R, y):
+    def run(self, lay: Layout, R, y, x):
         """The K intervals integrated side by side from their starts, rotations R (K, 3, 3) and
-        (N, M, q, w) y (K, 12), each from p = 0 and l = 0: ends, nodes (K, n_steps / K + 1) and
-        stage values."""
+        (N, M, q, w) y (K, 12), each from p = 0 and l = 0, with the contact forces of the
+        unknowns x (single shooting): ends, nodes (K, n_steps / K + 1), stage values and with a
+        scene each step start's ``contact.Starts``."""
         K = self.K
+        lam = self.forces(x)
+        forces = None if lam is None else jnp.zeros((lay.h.size, lam.shape[1])).at[self.candidates].set(lam[:-1])
 
         def split(a):
             return a.reshape(K, -1, *a.shape[1:])
@@ -344,36 +386,52 @@ class Problem(NamedTuple):
         start = Dyn(State(zeros, R, y[:, :3], y[:, 3:6]), y[:, 6:9], y[:, 9:], jnp.zeros((K, self.robot.n_tendons)))
         per = jax.tree.map(split, lay._replace(plan=None))
         integrate = jax.vmap(
-            lambda lay, stages, d, memory: _integrate(self.robot, self.load, self.gravity, lay, self.c, stages, d, memory)
+            lambda lay, stages, d, memory, forces: _integrate(
+                self.robot, self.load, self.gravity, lay, self.c, stages, d, memory, forces
+            )
         )
-        return integrate(per, split(self.history[0]), start, split(self.memory))
+        return integrate(per, split(self.history[0]), start, split(self.memory), None if forces is None else split(forces))
 
     def starts(self, u: Unknowns):
         """Every interval's start rotation (K, 3, 3) and (N, M, q, w) (K, 12); the base's R = I, q = w = 0."""
         R = jnp.concatenate([jnp.eye(3)[None], u.R])
         return R, jnp.concatenate([jnp.concatenate([u.x[:6], jnp.zeros(6)])[None], u.z]) * self.S[None]
 
-    def closing(self, lay: Layout, x, ends: Dyn, R_next, lengths=None):
+    def closing(self, lay: Layout, x, ends: Dyn, R_next, lengths=None, starts=None):
         """Each interval's end against the next start, rotation vector of R_end R_next^T and
-        (N, M, q, w) / S (K, 15); statics' scaled tip and driven-tendon rows (``rod.closing``)
-        at the last end, the tip's point mass taking m p_tt from N there, with the tendons' rest
-        lengths ``lengths`` (None: the intervals' summed); and each tendon's slack flag."""
+        (N, M, q, w) / S (K, 15); statics' scaled tip, driven-tendon and contact rows
+        (``rod.closing``) at the last end, the tip's point mass taking m p_tt from N there, with
+        the tendons' rest lengths ``lengths`` (None: the intervals' summed) and the candidates'
+        gaps from the steps' ``starts``; each tendon's slack flag; and the contact.Candidates
+        (None without a scene)."""
         last = jax.tree.map(lambda a: a[-1], ends)
         N_L = last.y.N + lay.plan.mass[-1] * _acceleration(self.c, last, self.history[1][:3])
         lengths = jnp.sum(ends.l, 0) if lengths is None else lengths
-        tail, slack = rod.closing(self.robot, self.actuation(x), self.load, lay.plan, last.y._replace(N=N_L), lengths, self.F_c)
+        touch = None
+        if self.load.scene is not None:
+            where = self.candidates
+            tip_gap = self.load.scene.distances(last.y.p) - lay.plan.intervals.radius[-1]
+            gaps = jnp.concatenate([starts.gap[0, where], tip_gap[None]])
+            touch = contact.Candidates(self.forces(x), gaps, jnp.append(lay.h[where] == 0, False))
+        y_L = last.y._replace(N=N_L)
+        tail, slack = rod.closing(self.robot, self.actuation(x), self.load, lay.plan, y_L, lengths, self.F_c, touch, self.mu)
         y = jnp.concatenate([ends.y.N, ends.y.M, ends.q, ends.w], -1) / self.S[None]
-        return jnp.concatenate([vee_skew(ends.y.R @ jnp.swapaxes(R_next, -1, -2)), y], -1), tail, slack
+        return jnp.concatenate([vee_skew(ends.y.R @ jnp.swapaxes(R_next, -1, -2)), y], -1), tail, slack, touch
 
     def residual(self, u: Unknowns):
-        """Continuity at every interior start ((K - 1) 15, flattened), then the tip's (6,) and
-        the driven tendons' (n_d,); and the run (ends, nodes, stage values) with the tendon
-        tensions (a slack driven tendon's exactly 0, as in statics) and each RK4 step's
-        (frictionless) tensions, (n_steps, n_t)."""
+        """Continuity at every interior start ((K - 1) 15, flattened), then the tip's (6,), the
+        driven tendons' (n_d,) and the contact rows; and the ``Run`` there."""
         lay = self.layout(u.x)
-        out = self.run(lay, *self.starts(u))
-        cont, tail, slack = self.closing(lay, u.x, out[0], _next_rotations(u))
-        return _stacked(u, cont, tail), (*out, jnp.where(slack, 0.0, self.actuation(u.x).tensions), lay.P.tau)
+        ends, nodes, z, starts = self.run(lay, *self.starts(u), u.x)
+        cont, tail, slack, touch = self.closing(lay, u.x, ends, _next_rotations(u), starts=starts)
+        found = None
+        if touch is not None:
+            where = self.candidates
+            p = jnp.concatenate([starts.p[0, where], jnp.sum(ends.y.p, 0)[None]])
+            s = jnp.append(lay.s0[where], self.robot.length)
+            found = contact.outputs(self.load.scene, s, p, touch, self.F_c, self.robot.length)
+        tensions = jnp.where(slack, 0.0, self.actuation(u.x).tensions)
+        return _stacked(u, cont, tail), Run(ends, nodes, z, tensions, lay.P.tau, found)
 
     def linearize(self, u: Unknowns):
         """The residual and its Jacobian in (x, each interior's rotation (I + w^) R, then z): one
@@ -392,32 +450,50 @@ class Problem(NamedTuple):
             v = E @ w[:m]
             x = u.x.at[6:].add(w[m:])
             lay = self.layout(x)
-            run = self.run(lay, R + hat(v[:3])[None] @ R, y + (v[3:] * self.S)[None])[0]
-            out = (*self.closing(lay, x, run, R_next)[:2], run.l)
-            return out, (*out, lay, run)
+            run, _, _, starts = self.run(lay, R + hat(v[:3])[None] @ R, y + (v[3:] * self.S)[None], x)
+            out = (*self.closing(lay, x, run, R_next, starts=starts)[:2], run.l)
+            return out, (*out, lay, run, starts)
 
-        (G, T, Gl), (cont, tail, l, lay, run) = jax.jacfwd(ends, has_aux=True)(jnp.zeros(m + n_d))
+        n_e = self.n_extra
+        (G, T, Gl), (cont, tail, l, lay, run, starts) = jax.jacfwd(ends, has_aux=True)(jnp.zeros(m + n_e))
 
         def columns(k):  # interval k's start unknowns: the base wrench for the first
-            return slice(0, 6) if k == 0 else slice(6 + n_d + N_START * (k - 1), 6 + n_d + N_START * k)
+            return slice(0, 6) if k == 0 else slice(6 + n_e + N_START * (k - 1), 6 + n_e + N_START * k)
 
         def own(k, block):  # d(interval k's end) / d(its start's unknowns)
             return block[..., :m][..., base] if k == 0 and K > 1 else block[..., :m]
 
-        tensions = slice(6, 6 + n_d)
-        n = 6 + n_d + N_START * (K - 1)
+        extra = slice(6, 6 + n_e)
+        n = 6 + n_e + N_START * (K - 1)
         J = jnp.zeros((n, n))
         for k in range(K - 1):
             rows = slice(N_START * k, N_START * (k + 1))
             J = J.at[rows, columns(k)].set(own(k, G[k])).at[rows, columns(k + 1)].set(-jnp.eye(N_START))
-            J = J.at[rows, tensions].set(G[k][:, m:])
-        tip = n - 6 - n_d
-        J = J.at[tip:, tensions].set(T[:, m:]).at[tip : tip + 6, columns(K - 1)].set(own(K - 1, T[:6]))
+            J = J.at[rows, extra].set(G[k][:, m:])
+        tip = n - 6 - n_e
+        J = J.at[tip:, extra].set(T[:, m:]).at[tip : tip + 6, columns(K - 1)].set(own(K - 1, T[:6]))
         if n_d:
-            dl = jax.jacfwd(lambda lengths: self.closing(lay, u.x, run, R_next, lengths)[1][6:])(jnp.sum(l, 0))
+            driven = slice(6, 6 + n_d)
+            dl = jax.jacfwd(lambda lengths: self.closing(lay, u.x, run, R_next, lengths, starts)[1][driven])(jnp.sum(l, 0))
             for k in range(K):
-                J = J.at[tip + 6 :, columns(k)].set(dl @ own(k, Gl[k]))
+                J = J.at[tip + 6 : tip + 6 + n_d, columns(k)].set(dl @ own(k, Gl[k]))
+        if self.n_contact:  # single shooting: the base wrench moves every candidate
+            J = J.at[tip + 6 + n_d :, columns(0)].set(T[6 + n_d :, :m])
         return _stacked(u, cont, tail), J
+
+
+class Run(NamedTuple):
+    """What ``Problem.residual`` integrated: the intervals' ends, nodes (K, n_steps / K + 1) and
+    stage values; the tendon tensions (a slack driven tendon's exactly 0, as in statics); each
+    RK4 step's (frictionless) span tensions (n_steps, n_t); with a scene the ``contact.Contact``
+    at the candidates, else None."""
+
+    ends: Dyn
+    nodes: Dyn
+    z: jax.Array
+    tensions: jax.Array
+    spans: jax.Array
+    contact: contact.Contact | None
 
 
 def _next_rotations(u: Unknowns):
@@ -498,15 +574,17 @@ def _newton(problem: Problem, u0: Unknowns, solver: SolverOptions):
 
 
 def _step(problem_at, guess: Unknowns, previous: Unknowns, solver: SolverOptions):
-    """One time step's root, ``problem_at(lam, frozen)`` its Problem with the step's change of
-    inputs scaled by lam (1: the step's own), its inputs without derivatives where ``frozen``.
+    """One time step's root, ``problem_at(lam, frozen, mu)`` its Problem with the step's change of
+    inputs scaled by lam (1: the step's own), its inputs without derivatives where ``frozen``,
+    its contact rows smoothed by mu.
 
     First up to CHORD_STEPS chord steps from ``guess`` with the Jacobian there, each checked by a
     primal pass (a Jacobian pass costs about four), while each shortens the chord correction
     (the natural level |J^-1 r|, as in ``_newton``): where they
     reach the tolerance, the step is done. Else Newton (``_newton``) from the best point; where it
-    fails, load continuation as in statics from
-    the last step's root ``previous``: ``solver.stages`` ramps of equal stages in turn, each stage
+    fails and there is contact, the smoothed complementarity from the guess, mu decreasing
+    (``contact.SMOOTHING``, as statics), then the exact one, each from the last point; then load
+    continuation as in statics from the last step's root ``previous``: ``solver.stages`` ramps of equal stages in turn, each stage
     from the last one's root. That search runs without derivatives; its root then passes
     ``lax.custom_root`` at the full inputs, so derivatives of anything downstream go through each
     step's implicit solve, by the Jacobian at the root (``Problem.linearize``: in
@@ -514,7 +592,7 @@ def _step(problem_at, guess: Unknowns, previous: Unknowns, solver: SolverOptions
 
     Returns the root, the StepInfo (chord and Newton steps and the code of the search, the
     residual of the run at the root: the same to rounding) and that run (ends, nodes, stage
-    values, tensions, span tensions: ``Problem.residual``)."""
+    values, tensions, span tensions, contact: ``Problem.residual``'s ``Run``)."""
     guess, previous = lax.stop_gradient((guess, previous))
     full = problem_at(1.0, frozen=True)
     r, J = full.linearize(guess)
@@ -535,23 +613,32 @@ def _step(problem_at, guess: Unknowns, previous: Unknowns, solver: SolverOptions
     begin = (guess, r, jax.scipy.linalg.lu_solve(factors, r), jnp.int32(0), jnp.bool_(True))
     guess, r, _, chords, _ = lax.while_loop(chording, chord, begin)
 
+    # each attempt's (mu, ramp stages, start: 0 the guess, 1 the last step's root, 2 the last attempt's point)
+    plan = [(0.0, solver.stages[0], 0)]
+    if full.load.scene is not None:
+        plan += [(mu, 1, 2 if j else 0) for j, mu in enumerate((*contact.SMOOTHING, 0.0))]
+    plan += [(0.0, k, 1) for k in solver.stages[1:]]
+    mus, ramps, starts = (np.array(column) for column in zip(*plan, strict=True))
+
     def attempt(state):
-        a, _, iterations, _ = state
-        k = jnp.asarray(solver.stages)[a]
+        a, last, iterations, _ = state
+        mu, k = jnp.asarray(mus)[a], jnp.asarray(ramps)[a]
 
         def stage(j, carry):
             u, its, code = carry
-            u_new, steps, code_new = _newton(problem_at((j + 1) / k, frozen=True), u, solver)
+            u_new, steps, code_new = _newton(problem_at((j + 1) / k, frozen=True, mu=mu), u, solver)
             ok = code == status.SUCCESS
             return jax.tree.map(lambda n, o: jnp.where(ok, n, o), u_new, u), its + steps, jnp.where(ok, code_new, code)
 
-        start = jax.tree.map(lambda g, p: jnp.where(a == 0, g, p), guess, previous)
+        start = jax.tree.map(lambda *c: jnp.asarray(c)[jnp.asarray(starts)[a]], guess, previous, last)
         u, its, code = lax.fori_loop(0, k, stage, (start, jnp.int32(0), jnp.int32(status.SUCCESS)))
+        u = jax.tree.map(lambda n, o: jnp.where(jnp.all(jnp.isfinite(u.x)), n, o), u, start)
+        code = jnp.where((mu > 0) & (code == status.SUCCESS), status.NEWTON_LIMIT, code)  # smoothed: not the root
         return a + 1, u, iterations + its, code
 
     def more(state):
         a, *_, code = state
-        return (code != status.SUCCESS) & (a < len(solver.stages))
+        return (code != status.SUCCESS) & (a < len(plan))
 
     done = jnp.max(jnp.abs(r)) <= solver.tol
     first = (jnp.int32(0), guess, chords, jnp.where(done, status.SUCCESS, status.NEWTON_LIMIT).astype(jnp.int32))
@@ -592,6 +679,11 @@ class Trajectory:
         displacements: what each tendon's encoder reads [m], (n, n_t): its rest length inside
             the straight robot less its present one (``rod.displacements``).
         insertions: each tube's depth [m], (n, n_tubes).
+        contact_force: with a scene, each contact candidate's normal force against each obstacle
+            [N], (n, n_c, n_o), exactly 0 where not touching: candidates at every
+            ``scene.every``-th node from the base (``s[:, every::every]``) and the tip; (n, 0, 0)
+            without a scene.
+        contact_gap: the body surface's distance to each obstacle there [m], (n, n_c, n_o).
         iterations: chord and Newton steps of each time step (n,) (``_step``), 0 at the start.
         result: each time step's status code (n,) (``tdct_jax.status``), SUCCESS (0) when its
             scaled residual reached ``solver.tol``.
@@ -610,6 +702,8 @@ class Trajectory:
     tendon_tension: jax.Array
     displacements: jax.Array
     insertions: jax.Array
+    contact_force: jax.Array
+    contact_gap: jax.Array
     iterations: jax.Array
     result: jax.Array
     residual_norm: jax.Array
@@ -660,10 +754,8 @@ def _inputs(robot: Robot, load: Loads, driven: tuple, given: dict, n: int | None
 
 
 def check(robot: Robot, act: Actuation, load: Loads, solver: SolverOptions) -> None:
-    """What ``simulate`` does not handle yet, refused by name; statics' checks of robot and inputs
+    """What ``simulate`` does not handle, refused by name; statics' checks of robot and inputs
     together (``act``: the driven tendons' largest displacements)."""
-    if load.scene is not None:
-        raise ValueError("scene: contact is not simulated yet")
     if solver.transition != "balanced" or solver.tendon_model != "exact":
         raise ValueError("solver: simulate uses the 'balanced' transition and 'exact' tendons")
     rod.check_arguments(robot, act, load, solver)
@@ -684,6 +776,7 @@ def simulate(
     point_moment=None,
     insertions=None,
     load: Loads | None = None,
+    scene=None,
     start: str = "static",
     alpha: float = ALPHA,
     gravity=STANDARD_GRAVITY,
@@ -716,6 +809,8 @@ def simulate(
         load: distributed force and point loads (``Loads``; its tip load is replaced by
             ``tip_force`` and ``tip_moment``, its point loads' values by ``point_force`` and
             ``point_moment`` where given).
+        scene: obstacles the robot may touch (a ``tdct.Scene``, fixed in space): statics'
+            frictionless contact rows at each step, single shooting (docs/dynamics.md).
         start: "static": at rest in the static equilibrium of the inputs' first row; "straight":
             the straight, unstrained robot at rest.
         alpha: BDF-alpha parameter in [-0.5, 0] (module docstring).
@@ -735,7 +830,11 @@ def simulate(
     for name, obj, cls in (("robot", robot, Robot), ("load", load, Loads), ("solver", solver, SolverOptions)):
         if not isinstance(obj, cls) and not (name == "solver" and obj is None):
             raise TypeError(f"{name} must be a tdct.{cls.__name__}, got {type(obj).__name__}")
+    if scene is not None:
+        load = load.with_scene(scene)
     solver = default_solver(robot, load) if solver is None else solver
+    if scene is not None:
+        load = with_scene(robot, load, scene, solver)
     if start not in ("static", "straight"):
         raise ValueError(f"start = {start!r}: 'static' or 'straight'")
     dt = as_array("dt", dt, (), unit=" s")
@@ -761,13 +860,15 @@ def simulate(
         for i in np.flatnonzero(np.any((np.asarray(I) < 0) | (np.asarray(I) > L), axis=1))[:1]:
             check_range(f"insertions[{i}] (t = {i * float(dt):g} s)", I[i], 0.0, L, unit=f" m (0 to the robot length {L:g} m)")
     g = gravity_vector(gravity)
+    n_c = 0 if scene is None else (_candidates(robot, load, solver.steps).size + 1) * load.scene.n_obstacles
     base = jnp.concatenate(
-        [F[0], C[0] + jnp.cross(robot.length * E3, F[0]), T[0, np.asarray(driven, int)]]
-    )  # the tip load carried to the base
+        [F[0], C[0] + jnp.cross(robot.length * E3, F[0]), T[0, np.asarray(driven, int)], jnp.zeros(n_c)]
+    )  # the tip load carried to the base, contact free
     if start == "static":  # the static solver's load continuation finds the start
         held = load._with(point_force=PF[0], point_moment=PM[0]).with_tip(F[0], C[0])
         found = solve(robot, act, held, gravity=g, solver=solver, throw=throw)
-        base = jnp.concatenate([found.base_wrench, found.tensions[np.asarray(driven, int)]])
+        pressed = jnp.zeros(0) if scene is None else found.contact.force.reshape(-1)
+        base = jnp.concatenate([found.base_wrench, found.tensions[np.asarray(driven, int)], pressed])
     out = _simulate(robot, act, load, rows, dt, alpha, g, base, solver, start == "static", moving, checkpoint)
     if throw and is_concrete(out.result):
         failed = np.flatnonzero(np.asarray(out.result) != status.SUCCESS)
@@ -809,7 +910,7 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
     def breakpoints(robot, act_i, ld):
         return rod.plan(robot, act_i, ld, gravity).b
 
-    def problem(i, c_i, history, b_old, memory, lam=1.0, frozen=False):
+    def problem(i, c_i, history, b_old, memory, lam=1.0, frozen=False, mu=0.0):
         """Row i's Problem; ``history`` at the stage points of breakpoints ``b_old`` (the last step's)."""
         act_i, ld = inputs(i, lam)
         parts = (robot, act_i, ld, gravity, c_i, history, b_old, memory)
@@ -817,7 +918,7 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
         if moving:
             history = (remap(history[0], b_old, breakpoints(robot_, act_i, ld), solver.steps), history[1])
         F_c = rod.force_scale(robot_, act_i, ld, gravity_)
-        return Problem(robot_, act_i, ld, gravity_, c_i, history, memory, F_c, _scale(F_c, L, dt), K, solver.steps)
+        return Problem(robot_, act_i, ld, gravity_, c_i, history, memory, F_c, _scale(F_c, L, dt), K, solver.steps, mu)
 
     def advance(carry, i):
         (u, before, earlier), z1, z2, zt1, b_old, memory = carry
@@ -827,8 +928,8 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
         b = breakpoints(robot, *inputs(i))
         guess = _extrapolate(u, before, earlier, jnp.clip(i - 1, 0, 2))
         guess, previous = (v.scaled(at.F_c, at.S) for v in (guess, u))
-        root, info, (ends, nodes, z, tensions, spans) = _step(
-            lambda lam, frozen=False: problem(i, ci, history, b_old, memory, lam, frozen), guess, previous, solver
+        root, info, (ends, nodes, z, tensions, spans, touch) = _step(
+            lambda lam, frozen=False, mu=0.0: problem(i, ci, history, b_old, memory, lam, frozen, mu), guess, previous, solver
         )
         offsets = jnp.cumsum(ends.y.p, 0) - ends.y.p  # each interval ran from p = 0 and l = 0
         lengths = jnp.cumsum(ends.l, 0) - ends.l
@@ -843,7 +944,9 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
             z1 = (remap(z1[0], b_old, b, solver.steps), z1[1])
         older = jax.tree.map(lambda a, b: jnp.where(i == 0, a, b), z, z1)  # the next step's z(t - 2 dt)
         profile = jnp.concatenate([spans, spans[-1:]])
-        return ((root.physical(at.F_c, at.S), u, before), z, older, zt, b, memory), (nodes, tensions, profile, info, b)
+        pressed = (jnp.zeros((0, 0)),) * 2 if touch is None else (touch.force, touch.gap)
+        out = (nodes, tensions, profile, pressed, info, b)
+        return ((root.physical(at.F_c, at.S), u, before), z, older, zt, b, memory), out
 
     act0, load0 = inputs(0)
     rest = (jnp.zeros((n_nodes, 4, 12)), jnp.zeros(6))
@@ -856,7 +959,7 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
     slack = jnp.zeros((n_nodes, robot.n_tendons))  # the first step's span tensions: loaded from slack
     start = ((u0, u0, u0), rest, rest, jax.tree.map(jnp.zeros_like, rest), lay0.plan.b, slack)
     step = jax.checkpoint(advance) if checkpoint else advance
-    _, (nodes, tensions, profile, info, b) = lax.scan(step, start, jnp.arange(0 if static_start else 1, T.shape[0]))
+    _, (nodes, tensions, profile, pressed, info, b) = lax.scan(step, start, jnp.arange(0 if static_start else 1, T.shape[0]))
     s = jax.vmap(lambda b: jnp.concatenate([_points(b, solver.steps).reshape(-1), b[-1:]]))(b)
     displacements = jax.vmap(lambda l: rod.displacements(robot, l))(nodes.l[:, -1])
     if not static_start:  # the straight, unstrained robot at rest
@@ -867,6 +970,13 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
         nodes = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), straight, nodes._replace(l=None, f=None))
         s = jnp.concatenate([s0[None], s])
         profile = jnp.concatenate([jnp.concatenate([lay0.P.tau, lay0.P.tau[-1:]])[None], profile])
+        if load.scene is not None:
+            inner = _candidates(robot, load, solver.steps)
+            radius = jnp.append(lay0.P.radius[inner], lay0.plan.intervals.radius[-1])
+            gap = jax.vmap(load.scene.distances)(s0[np.append(inner, n - 1), None] * E3[None]) - radius[:, None]
+            pressed = tuple(jnp.concatenate([a[None], b]) for a, b in zip((jnp.zeros_like(gap), gap), pressed, strict=True))
+        else:
+            pressed = tuple(jnp.zeros((T.shape[0], 0, 0)) for _ in range(2))
         tensions = jnp.concatenate([T[:1], tensions])
         displacements = jnp.concatenate([jnp.zeros((1, robot.n_tendons)), displacements])
         first = StepInfo(jnp.int32(0), jnp.int32(status.SUCCESS), jnp.zeros(()))
@@ -885,6 +995,7 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
         profile,
         displacements,
         rows[6],
+        *pressed,
         info.iterations,
         info.result,
         info.residual_norm,

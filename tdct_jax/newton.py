@@ -84,9 +84,11 @@ def damped(linearize, step, x0, tol, max_iter, shapes=None, natural=False):
     (residual, J), ``step(x, residual, J, mu)`` the next point to try with damping mu; x may be a
     pytree (e.g. with rotations, updated on SO(3) by ``step``). ``shapes``: those of (residual, J)
     when known, else from a trace of ``linearize``. A step is taken where it lowers |r|^2; with
-    ``natural`` (J a matrix), an undamped one (mu <= MU_START, as ``step`` makes it) where it
+    ``natural`` (J a matrix), an undamped one (mu <= MU_START, as ``step`` makes it) also where it
     lowers Deuflhard's natural level |J^-1 r|^2 at the last point's J, which no scaling of the
-    rows changes. Returns what ``newton`` returns."""
+    rows changes (either suffices: where J changes abruptly, as where a contact closes, the
+    level at the last J can rise on a step that lowers |r| and leads to the root). Returns what
+    ``newton`` returns."""
 
     def not_done(c):
         x, r, J, mu, it, x_try = c
@@ -99,7 +101,7 @@ def damped(linearize, step, x0, tol, max_iter, shapes=None, natural=False):
         if natural:
             d = jnp.linalg.solve(J, jnp.stack([r_try, r], -1))  # one factorisation for both
             level = jnp.sum(d[:, 0] ** 2) < jnp.sum(d[:, 1] ** 2)
-            lower = jnp.where((it > 0) & (mu <= MU_START), level, lower)
+            lower = jnp.where((it > 0) & (mu <= MU_START), level | lower, lower)
         ok = jnp.all(jnp.isfinite(r_try)) & lower
         x, r, J = jax.tree.map(lambda new, old: jnp.where(ok, new, old), (x_try, r_try, J_try), (x, r, J))
         mu = jnp.where(ok, mu / 10, mu * 10)

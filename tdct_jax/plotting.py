@@ -996,10 +996,13 @@ second, and viewers slow shorter delays than 2 of them)."""
 
 
 @_styled
-def animate_trajectory(traj, path: str | Path, frames: int = 60, title: str | None = None, progress=None, dpi: int = 80):
+def animate_trajectory(
+    traj, path: str | Path, frames: int = 60, title: str | None = None, progress=None, dpi: int = 80, scene=None
+):
     """A GIF of a simulated robot's side view (world z-y, mm): its centreline at ``frames`` times
     spread evenly over the trajectory (every time when it has fewer), the tip's path so far and the
-    start's centreline dashed, the time in each frame's title; saved with Pillow at ``GIF_FPS``.
+    start's centreline dashed, the time in each frame's title, and the obstacles of ``scene`` (the
+    one it was simulated with) as ``plot_robot`` draws them; saved with Pillow at ``GIF_FPS``.
 
     Args:
         traj: a Trajectory (JAX or numpy arrays).
@@ -1020,6 +1023,8 @@ def animate_trajectory(traj, path: str | Path, frames: int = 60, title: str | No
     dt = t[1] - t[0] if len(t) > 1 else 1.0
     digits = max(0, -int(np.floor(np.log10(dt) + 1e-9)))  # the time to the step's last digit
     zy = p[rows][..., [2, 1]].reshape(-1, 2)
+    if scene is not None:
+        zy = np.concatenate([zy, _scene_points(scene, p[0])[:, [2, 1]]])
     middle, half = (zy.max(0) + zy.min(0)) / 2, 0.55 * max(np.ptp(zy, axis=0).max(), 1e-3)
     fig, ax = plt.subplots(figsize=(7, 6.2), layout="constrained")
     ax.set_xlim(middle[0] - half, middle[0] + half)
@@ -1030,6 +1035,9 @@ def animate_trajectory(traj, path: str | Path, frames: int = 60, title: str | No
     trace = ax.plot([], [], color="tab:red", lw=1, alpha=0.7, label="tip path")[0]
     tip = ax.plot([], [], "o", color="tab:red", ms=6)[0]
     ax.plot(0, 0, "ks", ms=8, label="base")
+    if scene is not None:
+        _draw_scene(ax, scene, (2, 1), p.reshape(-1, 3))
+        ax.fill([], [], color=OBSTACLE, alpha=0.35, label=f"obstacles: {', '.join(scene.names)}")
     ax.set_xlabel("z [mm]")
     ax.set_ylabel("y [mm]")
     ax.legend(loc="best", fontsize="small")

@@ -242,6 +242,38 @@ def test_tendon_friction_keeps_statics_hysteresis_and_settles_onto_solve_with_it
     np.testing.assert_allclose(pulled, direct.tip_position, rtol=0, atol=1e-7)
 
 
+def test_a_rod_falling_onto_a_plane_never_enters_it_balances_momentum_and_settles_onto_solve():
+    """The critically damped rod released straight under gravity lands on a plane 2.2 mm below
+    its axis (a contact candidate every 5 RK4 steps and the tip): no candidate ever enters it,
+    every force pushes; the rod's momentum changes by the base force, the weight and the contact
+    forces at every step (the scheme's own derivative of the momentum, BDF-alpha, against their
+    sum: within 0.5% of the largest, the rest the nodes' trapezoid in s; an impact's impulse lands
+    in one step); and it settles onto ``solve``'s contact equilibrium, its tip at rest on the
+    plane with the force the plane takes."""
+    damped = robot(2 / OMEGA[0])
+    scene = tdct.Scene((tdct.Plane((0.0, -2.2e-3, 0.0), (0.0, 1.0, 0.0)),), every=5)
+    g = (0.0, -9.81, 0.0)
+    dt = T1 / 20
+    traj = simulate(damped, dt, 100, tensions=[0.0], scene=scene, gravity=g, start="straight", solver=SOLVER)
+    assert bool(traj.converged)
+    force, gap = np.asarray(traj.contact_force[..., 0]), np.asarray(traj.contact_gap[..., 0])
+    assert gap.min() > -1e-12 and force.min() >= 0 and force[:, -1].max() > 0.01
+    assert np.all((force == 0) | (np.abs(gap) < 1e-12))  # only a touching candidate pushes
+
+    momentum = RHO * A * np.trapezoid(np.asarray(traj.velocity[..., 1]), np.asarray(traj.s[0]), axis=1)
+    rate = -np.asarray(traj.force[:, 0, 1]) + force.sum(1) + RHO * A * L * g[1]
+    c = dynamics.scheme(dt)
+    derivative = np.zeros_like(momentum)
+    for i in range(1, len(momentum)):
+        derivative[i] = c.c0 * momentum[i] + c.c1 * momentum[i - 1] + c.c2 * momentum[max(i - 2, 0)] + c.d1 * derivative[i - 1]
+    assert np.abs(derivative - rate)[1:].max() < 5e-3 * np.abs(rate[1:]).max()  # row 0: the straight start, not at rest
+
+    static = tdct.solve(damped, tdct.Actuation([0.0]), gravity=g, scene=scene, solver=tdct.SolverOptions(steps=20))
+    np.testing.assert_allclose(traj.tip_position[-1], static.tip_position, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(traj.contact_force[-1], static.contact.force, rtol=0, atol=1e-9)
+    assert traj.tip_position[-1, 1] == pytest.approx(-1.2e-3, abs=1e-12)  # on the plane: its surface 1 mm below the axis
+
+
 def tubed(tube_E, tube_density, damping=0.0):
     """The rod as a tube (1 mm bore) with a tube of its own inside, pushed along it in time."""
     section = tdct.Section(end=L, outer_diameter=D, inner_diameter=1e-3, E=E, nu=0.3, density=RHO, damping=damping)
@@ -379,10 +411,12 @@ def test_a_step_that_does_not_converge_raises_naming_its_time_and_numbers(runs, 
     assert words.endswith("Try more solver.intervals (multiple shooting), a ramped input or more solver.max_iter.")
 
 
-def test_what_is_not_simulated_yet_is_refused():
+def test_what_is_not_simulated_is_refused():
     rough = robot().replace({"sections[0].friction": 0.1})
     with pytest.raises(ValueError, match="intervals = 4 with tendon friction"):
         simulate(rough, 1e-3, 4, tensions=[0.0], solver=tdct.SolverOptions(intervals=4))
+    with pytest.raises(ValueError, match="intervals = 4 with a scene: contact is solved by single shooting only"):
+        simulate(robot(), 1e-3, 4, scene=tdct.Scene((tdct.Plane((0.0, -0.01, 0.0)),)), solver=tdct.SolverOptions(intervals=4))
     with pytest.raises(ValueError, match="insertions along time with tendon friction"):
         simulate(tubed(75e9, 6450.0).replace({"sections[0].friction": 0.1}), 1e-3, 4, insertions=np.zeros((5, 1)))
 

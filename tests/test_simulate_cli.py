@@ -15,6 +15,7 @@ import tdct_jax as tdct
 from tdct_jax import cli, status
 from tdct_jax.cli import main
 from tdct_jax.dynamics import default_solver
+from tdct_jax.scene import SCENES
 
 ROD = """length = 0.2
 
@@ -105,6 +106,7 @@ BAD_FLAGS = [
     (["--gif", "robot.mp4"], "--gif robot.mp4: .mp4 is not a GIF; allowed: .gif"),
     (["--insertion-mm", "10"], "--insertion-mm 10: the robot has 0 tubes"),
     (["--set", "sections[0].damping=-1"], "--set: "),
+    (["--scene", str(SCENES / "table.toml"), "--intervals", "2"], "--scene with --intervals 2: contact is solved by single"),
 ]
 
 
