@@ -354,11 +354,13 @@ class Problem(NamedTuple):
 
     @property
     def n_contact(self) -> int:
+        """Contact unknowns: one force per candidate and obstacle."""
         scene = self.load.scene
         return 0 if scene is None else (self.candidates.size + 1) * scene.n_obstacles
 
     @property
     def candidates(self) -> np.ndarray:
+        """``_candidates`` of this problem."""
         return _candidates(self.robot, self.load, self.steps)
 
     def forces(self, x):
@@ -436,9 +438,10 @@ class Problem(NamedTuple):
     def linearize(self, u: Unknowns):
         """The residual and its Jacobian in (x, each interior's rotation (I + w^) R, then z): one
         forward pass perturbing every interval's start alike (each end depends on its own start
-        only) and the driven tensions, its blocks set into the dense matrix. The driven tendons'
-        rows depend on every interval's start through the summed lengths: their blocks are
-        d(row) / d(lengths) times each interval's d(l) / d(start)."""
+        only), the driven tensions and the contact forces, its blocks set into the dense matrix.
+        The driven tendons' rows depend on every interval's start through the summed lengths:
+        their blocks are d(row) / d(lengths) times each interval's d(l) / d(start). Contact
+        (single shooting) takes the base wrench's columns of its rows as they come."""
         K, n_d = self.K, len(self.act.driven)
         R, y = self.starts(u)
         R_next = _next_rotations(u)
