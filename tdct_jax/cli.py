@@ -1067,6 +1067,8 @@ def read_input_table(path, n_tendons: int, n_tubes: int = 0) -> InputTable:
     said = ", ".join(
         [TIME_COLUMN, *tensions[:1], *(["...", tensions[-1]] if n_tendons > 2 else tensions[1:]), *TIP_FORCE_COLUMNS]
     )
+    said += "; displacement_i_mm in place of tension_i_N for a tendon driven by displacement"
+    said += "; insertion_i_mm for every tube, to move the tubes" if n_tubes else ""
     for name in names:
         if name in allowed:
             continue

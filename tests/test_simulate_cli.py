@@ -71,6 +71,7 @@ BAD_TABLES = [
         "t,tension_1_N\n0,0\n",
         "inputs.csv:1: unknown column 't' (did you mean 't_s'?); the columns are t_s, tension_1_N, tip_force",
     ),
+    ("t_s,displacment_1_mm\n0,0\n", "tip_force_z_N; displacement_i_mm in place of tension_i_N for a tendon driven by"),
     ("tension_1_N\n0\n", "inputs.csv:1: no time column 't_s' (the times in seconds, from 0); columns present: ['tension_1_N']"),
     ("t_s,tension_1_N\n0,0\n0.01,1\n0.01,2\n", "inputs.csv:4: t_s = 0.01 s is not after the row before's 0.01 s"),
     ("t_s,tension_1_N\n0.1,0\n0.2,1\n", "inputs.csv:2: t_s = 0.1 s: the table starts at t = 0"),
