@@ -187,9 +187,8 @@ def anatomy(robot, insertions, dt, solver, newton_steps, ms_per_step, repeats=20
     K = solver.intervals
 
     def problem(robot, act, load, c, history, F_c):
-        memory = jnp.zeros((n, robot.n_tendons))  # span tensions of a last step (friction only)
         return dynamics.Problem(
-            robot, act, load, g, c, history, memory, F_c, dynamics._scale(F_c, robot.length, dt), K, solver.steps
+            robot, act, load, g, c, history, None, F_c, dynamics._scale(F_c, robot.length, dt), K, solver.steps
         )
 
     def unknowns(x):  # the interior starts' values do not change a pass's cost

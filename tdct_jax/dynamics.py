@@ -164,8 +164,8 @@ def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stage
 
     With tendon friction each step's span keeps one tension per tendon, and at the node that ends
     it the next span's is the last time step's there (``memory``, (n, n_t); None: zeros, loaded
-    from slack) held within the capstan bounds, as in statics (``rod.integrate``'s guides; the
-    tangents there from the step's fourth stage's history).
+    from slack) held within the capstan bounds, as in statics (``rod.guided``; the tangents there
+    from the step's fourth stage's history).
 
     ``forces``: with ``load.scene``, each step's contact forces against its obstacles [N] (n,
     n_o) (nonzero at candidates only): N jumps at the step's start by the point force -sum_o
@@ -208,16 +208,6 @@ def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stage
         seg, v, u = strains(spans(P, d), s, z_h, d)
         return tendon_tangents(seg, v, u) @ d.y.R.T
 
-    def guide(P: rod.Interval, s, h, z_h, d: Dyn, previous) -> Dyn:
-        """``rod.integrate``'s guide at the node d at s ending a step of length h."""
-        T = tangents(P, s, z_h, d)
-        phi = d.f.phi + P.mu * rod._turning(d.f.T, T)
-        spacing = jnp.where(P.spacing > 0, P.spacing, 1.0)
-        here = (P.spacing <= 0) | (jnp.floor(s / spacing) > jnp.floor((s - h) / spacing))
-        bound = jnp.exp(phi)
-        held = jnp.minimum(jnp.maximum(previous, d.f.base / bound), d.f.base * bound)
-        return d._replace(f=d.f._replace(tau=jnp.where(here, held, d.f.tau), T=T, phi=phi))
-
     def step(d: Dyn, k):
         P, s0, h, dN, dM, m, z_h, previous, f = k
         d = d._replace(y=d.y._replace(N=d.y.N + dN + m * _acceleration(c, d, z_h[0, 6:9]), M=d.y.M + dM))
@@ -233,7 +223,7 @@ def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stage
         new = jax.tree.map(lambda a, *b: a + h * sum(w * bi for w, bi in zip(weights, b, strict=True)), d, *ks)
         new = new._replace(y=new.y._replace(R=orthonormalize(new.y.R)))
         if new.f is not None:
-            new = guide(P, s0 + h, h, z_h[3], new, previous)
+            new = new._replace(f=rod.guided(new.f, tangents(P, s0 + h, z_h[3], new), P, s0 + h, h, previous))
         return new, (new, jnp.stack([z1, z2, z3, z4]), touch)
 
     if robot.has_friction and start.f is None:
@@ -241,7 +231,8 @@ def _integrate(robot: Robot, load: Loads, gravity, lay: Layout, c: Scheme, stage
         n_t = robot.n_tendons
         start = start._replace(f=rod.Friction(P0.tau, P0.tau, jnp.zeros((n_t, 3)), jnp.zeros(n_t)))
         start = start._replace(f=start.f._replace(T=tangents(P0, lay.s0[0], stages[0, 0], start)))
-    memory = jnp.zeros((lay.h.size, robot.n_tendons)) if memory is None else memory
+    if robot.has_friction and memory is None:
+        memory = jnp.zeros((lay.h.size, robot.n_tendons))
     xs = (lay.P, lay.s0, lay.h, lay.dN, lay.dM, lay.mass, stages, memory, forces)
     end, (nodes, z, touch) = lax.scan(step, start, xs)
     return end, jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), start, nodes), z, touch
@@ -323,12 +314,19 @@ def _candidates(robot: Robot, load: Loads, steps: int) -> np.ndarray:
     return load.scene.every * np.arange(1, contact.n_candidates(1, n, load.scene.every))
 
 
+def _n_contact(robot: Robot, load: Loads, steps: int) -> int:
+    """Contact unknowns: one force per candidate (``_candidates`` and the tip) and obstacle, 0
+    without a scene."""
+    return 0 if load.scene is None else (_candidates(robot, load, steps).size + 1) * load.scene.n_obstacles
+
+
 class Problem(NamedTuple):
     """One time step's boundary-value problem at given inputs: the robot, actuation (tensions,
     the driven tendons' commanded displacements), loads, gravity, scheme, history ((n_steps, 4,
-    12) stage points, (6,) tip), the last step's span tensions (``_integrate``'s memory, (n_steps,
-    n_t)), force scale F_c, ``_scale``, K, RK4 steps per breakpoint interval and the contact
-    rows' smoothing mu (``contact.fischer_burmeister``)."""
+    12) stage points, (6,) tip), with tendon friction the last step's span tensions
+    (``_integrate``'s memory, (n_steps, n_t); else None), force scale F_c, ``_scale``, K, RK4
+    steps per breakpoint interval and the contact rows' smoothing mu
+    (``contact.fischer_burmeister``)."""
 
     robot: Robot
     act: Actuation
@@ -336,7 +334,7 @@ class Problem(NamedTuple):
     gravity: jax.Array
     c: Scheme
     history: tuple
-    memory: jax.Array
+    memory: jax.Array | None
     F_c: jax.Array
     S: jax.Array
     K: int
@@ -354,9 +352,7 @@ class Problem(NamedTuple):
 
     @property
     def n_contact(self) -> int:
-        """Contact unknowns: one force per candidate and obstacle."""
-        scene = self.load.scene
-        return 0 if scene is None else (self.candidates.size + 1) * scene.n_obstacles
+        return _n_contact(self.robot, self.load, self.steps)
 
     @property
     def candidates(self) -> np.ndarray:
@@ -392,7 +388,8 @@ class Problem(NamedTuple):
                 self.robot, self.load, self.gravity, lay, self.c, stages, d, memory, forces
             )
         )
-        return integrate(per, split(self.history[0]), start, split(self.memory), None if forces is None else split(forces))
+        memory = None if self.memory is None else split(self.memory)
+        return integrate(per, split(self.history[0]), start, memory, None if forces is None else split(forces))
 
     def starts(self, u: Unknowns):
         """Every interval's start rotation (K, 3, 3) and (N, M, q, w) (K, 12); the base's R = I, q = w = 0."""
@@ -863,9 +860,13 @@ def simulate(
         for i in np.flatnonzero(np.any((np.asarray(I) < 0) | (np.asarray(I) > L), axis=1))[:1]:
             check_range(f"insertions[{i}] (t = {i * float(dt):g} s)", I[i], 0.0, L, unit=f" m (0 to the robot length {L:g} m)")
     g = gravity_vector(gravity)
-    n_c = 0 if scene is None else (_candidates(robot, load, solver.steps).size + 1) * load.scene.n_obstacles
     base = jnp.concatenate(
-        [F[0], C[0] + jnp.cross(robot.length * E3, F[0]), T[0, np.asarray(driven, int)], jnp.zeros(n_c)]
+        [
+            F[0],
+            C[0] + jnp.cross(robot.length * E3, F[0]),
+            T[0, np.asarray(driven, int)],
+            jnp.zeros(_n_contact(robot, load, solver.steps)),
+        ]
     )  # the tip load carried to the base, contact free
     if start == "static":  # the static solver's load continuation finds the start
         held = load._with(point_force=PF[0], point_moment=PM[0]).with_tip(F[0], C[0])
@@ -928,7 +929,7 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
         ci = jax.tree.map(lambda a: jnp.where(i == 0, 0.0, a), c)
         history = jax.tree.map(lambda a, b, d: ci.c1 * a + ci.c2 * b + ci.d1 * d, z1, z2, zt1)
         at = problem(i, ci, history, b_old, memory)
-        b = breakpoints(robot, *inputs(i))
+        b = breakpoints(robot, *inputs(i)) if moving else b_old
         guess = _extrapolate(u, before, earlier, jnp.clip(i - 1, 0, 2))
         guess, previous = (v.scaled(at.F_c, at.S) for v in (guess, u))
         root, info, (ends, nodes, z, tensions, spans, touch) = _step(
@@ -959,7 +960,8 @@ def _simulate(robot, act, load, rows, dt, alpha, gravity, base, solver, static_s
     y = _integrate(robot, load0, gravity, lay0._replace(plan=None), STATIC, rest[0], at_base)[1]
     inner = jax.tree.map(lambda a: a[n_nodes // K : n_nodes : n_nodes // K], y)
     u0 = Unknowns(base.at[3:6].divide(L), inner.y.R, jnp.concatenate([inner.y.N, inner.y.M, inner.q, inner.w], -1))
-    slack = jnp.zeros((n_nodes, robot.n_tendons))  # the first step's span tensions: loaded from slack
+    # the first step's span tensions: loaded from slack
+    slack = jnp.zeros((n_nodes, robot.n_tendons)) if robot.has_friction else None
     start = ((u0, u0, u0), rest, rest, jax.tree.map(jnp.zeros_like, rest), lay0.plan.b, slack)
     step = jax.checkpoint(advance) if checkpoint else advance
     _, (nodes, tensions, profile, pressed, info, b) = lax.scan(step, start, jnp.arange(0 if static_start else 1, T.shape[0]))

@@ -522,14 +522,7 @@ def integrate(
         def at(c: Carry, x) -> Carry:
             c = project(c)
             j, prev = x
-            T = tangents(k.P, c)
-            phi = c.f.phi + k.P.mu * _turning(c.f.T, T)
-            s = k.s0 + (j + 1) * k.h
-            d = jnp.where(k.P.spacing > 0, k.P.spacing, 1.0)
-            guide = (k.P.spacing <= 0) | (jnp.floor(s / d) > jnp.floor((s - k.h) / d))
-            bound = jnp.exp(phi)
-            held = jnp.minimum(jnp.maximum(prev, c.f.base / bound), c.f.base * bound)
-            return c._replace(f=c.f._replace(tau=jnp.where(guide, held, c.f.tau), T=T, phi=phi))
+            return c._replace(f=guided(c.f, tangents(k.P, c), k.P, k.s0 + (j + 1) * k.h, k.h, prev))
 
         return at
 
@@ -566,6 +559,20 @@ def integrate(
         c = c._replace(f=c.f._replace(T=tangents(P0, c._replace(y=carried(c.y, rotation), s=ps.s0[0] if helical else None))))
         memory = jnp.zeros((*ps.h.shape, steps, robot.n_tendons)) if memory is None else memory
     return lax.scan(piece, coupled(c._replace(s=None), ps, forces, memory), (ps, forces, memory))
+
+
+def guided(f: Friction, T, P: Interval, s, h, previous) -> Friction:
+    """The friction state at the node at s that ends a step of length h in interval P, the
+    tendons' world tangents there T (n_t, 3): the turning adds to phi, and where a guide sits
+    (every node of a channel, or the first past each disk at ``P.spacing``) the tension of the span
+    ahead is the previous pose's there, ``previous``, held within the capstan bounds
+    tau_b exp(-phi) and tau_b exp(phi) (module docstring, "Tendon friction")."""
+    phi = f.phi + P.mu * _turning(f.T, T)
+    d = jnp.where(P.spacing > 0, P.spacing, 1.0)
+    guide = (P.spacing <= 0) | (jnp.floor(s / d) > jnp.floor((s - h) / d))
+    bound = jnp.exp(phi)
+    held = jnp.minimum(jnp.maximum(previous, f.base / bound), f.base * bound)
+    return f._replace(tau=jnp.where(guide, held, f.tau), T=T, phi=phi)
 
 
 def _turning(a, b):
